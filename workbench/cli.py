@@ -1,0 +1,133 @@
+"""Command line: ``workbench scenes | show | run`` (and the study/reproduction commands).
+
+Examples (shell)::
+
+    workbench scenes
+    workbench show tp5
+    workbench run tp1 --k 0.005 -o out/tp1.nc --plot out/tp1.png
+    workbench run slab --set "traction_top=(0, 2*t)" --set gamma_nu=1 -o out/slab.nc
+"""
+from __future__ import annotations
+
+import argparse
+import sys
+
+from .parameters import ParameterError
+
+EXIT_BAD_INPUT, EXIT_DIVERGED = 2, 3
+
+
+def _overrides(args) -> dict:
+    out = {}
+    for item in args.set or []:
+        if "=" not in item:
+            raise ParameterError(f"--set {item!r}: write name=value, e.g. --set gamma_nu=0.5")
+        name, value = item.split("=", 1)
+        out[name.strip()] = value.strip()
+    for name in ("h", "k", "order", "scheme", "T"):
+        value = getattr(args, name, None)
+        if value is not None:
+            out[name] = value
+    return out
+
+
+def _add_scene_args(p, run_options=True):
+    p.add_argument("scene", help="built-in scene name (see 'workbench scenes') or a .toml scene file")
+    p.add_argument("--set", action="append", metavar="NAME=VALUE", help="override a parameter (repeatable)")
+    if run_options:
+        p.add_argument("--h", type=float, help="element size")
+        p.add_argument("--k", type=float, help="time step")
+        p.add_argument("--T", type=float, help="final time")
+        p.add_argument("--order", type=int, help="polynomial order of the displacement")
+        p.add_argument("--scheme", help="time scheme")
+
+
+def cmd_scenes(args) -> int:
+    from .scenes import PRESETS
+
+    width = max(map(len, PRESETS))
+    for name, preset in PRESETS.items():
+        print(f"{name:<{width}}  {preset.geometry:<5}  {preset.description}")
+    return 0
+
+
+def cmd_show(args) -> int:
+    from .scenes import scene
+
+    sc = scene(args.scene, **_overrides(args))
+    print(f"{sc.name} ({sc.geometry}, {sc.dim}D): {sc.description}")
+    print(f"terms assembled on the contact boundary: {', '.join(sc.terms) or 'none'}\n")
+    rows = [(n, str(v), u, r, m) for n, v, u, r, m in sc.table()]
+    w = [max(len(r[i]) for r in rows) for i in range(4)]
+    print(f"{'parameter':<{w[0]}}  {'value':<{w[1]}}  {'unit':<{w[2]}}  {'allowed':<{w[3]}}  meaning")
+    for r in rows:
+        print(f"{r[0]:<{w[0]}}  {r[1]:<{w[1]}}  {r[2]:<{w[2]}}  {r[3]:<{w[3]}}  {r[4]}")
+    return 0
+
+
+def cmd_run(args) -> int:
+    from . import plotting, results
+    from .run import run
+    from .schemes import Diverged
+
+    overrides = _overrides(args)
+    try:
+        ds = run(args.scene, progress=False if args.no_progress else None, **overrides)
+        code = 0
+    except Diverged as err:
+        print(f"error: {err}", file=sys.stderr)
+        ds, code = err.dataset, EXIT_DIVERGED
+    if args.output:
+        results.write(ds, args.output)
+        note = " (incomplete: see attrs 'failure')" if code else ""
+        print(f"wrote {args.output}{note}")
+    if args.plot:
+        plotting.overview(ds, args.plot)
+        print(f"wrote {args.plot}")
+    if not args.output and not args.plot:
+        print(_summary(ds))
+    return code
+
+
+def _summary(ds) -> str:
+    a = ds.attrs
+    lines = [f"{a['scene']}: {a['status']}, scheme {a['scheme']}, ndof {a['ndof']}, {a['nsteps']} steps, "
+             f"wall {a['wall_time']:.3g} s"]
+    last = ds.isel(time=-1)
+    for p in ds.probe.values:
+        xyz = ", ".join(f"{float(ds[f'probe_{c}'][p]):g}" for c in ds.component.values)
+        u = ", ".join(f"{float(v):.6g}" for v in last.u_probe.sel(probe=p).values)
+        lines.append(f"  u({xyz}; t={float(last.time):g}) = ({u})")
+    if "beta" in ds:
+        lines.append(f"  beta at t={float(last.time):g}: min {float(last.beta.min()):.6g}, max {float(last.beta.max()):.6g}")
+    return "\n".join(lines)
+
+
+def build_parser() -> argparse.ArgumentParser:
+    parser = argparse.ArgumentParser(prog="workbench", description=__doc__.split("\n")[0])
+    sub = parser.add_subparsers(dest="command", required=True)
+    p = sub.add_parser("scenes", help="list the built-in scenes")
+    p.set_defaults(func=cmd_scenes)
+    p = sub.add_parser("show", help="list a scene's parameters with value, unit, allowed range and meaning")
+    _add_scene_args(p, run_options=True)
+    p.set_defaults(func=cmd_show)
+    p = sub.add_parser("run", help="run a scene, write a netCDF archive and plots")
+    _add_scene_args(p)
+    p.add_argument("-o", "--output", help="netCDF archive to write (atomically)")
+    p.add_argument("--plot", help="PNG overview plot to write")
+    p.add_argument("--no-progress", action="store_true", help="no progress bar")
+    p.set_defaults(func=cmd_run)
+    return parser
+
+
+def main(argv=None) -> int:
+    args = build_parser().parse_args(argv)
+    try:
+        return args.func(args)
+    except ParameterError as err:
+        print(f"error: {err}", file=sys.stderr)
+        return EXIT_BAD_INPUT
+
+
+if __name__ == "__main__":  # pragma: no cover
+    sys.exit(main())

@@ -1,0 +1,215 @@
+"""From a scene to NGSolve objects: mesh, spaces, constant matrices, load and boundary forms.
+
+Built once per run, before time stepping. The volume matrices (viscous K_A,
+elastic K_G) are assembled here once; the contact-boundary forms exist only
+for the terms the scene declares (no contact and no adhesion: no boundary
+form; no adhesion: no beta space). Index arrays into the dof vector (contact
+nodes, probes, the point force, Dirichlet dofs) are computed here, so the time
+loop does only vector work.
+"""
+from __future__ import annotations
+
+from dataclasses import dataclass, field
+
+import ngsolve as ngs
+import numpy as np
+
+from . import meshes
+from .physics import bonding, contact, kelvin_voigt
+from .scenes import BOUNDARIES
+
+
+@dataclass
+class Discretisation:
+    """Everything a scheme needs about one scene on one mesh (see :func:`build`)."""
+
+    scene: object
+    mesh: ngs.Mesh
+    fes: ngs.FESpace
+    t: ngs.Parameter
+    u: ngs.GridFunction
+    v: ngs.GridFunction
+    viscous: ngs.BilinearForm
+    elastic: ngs.BilinearForm
+    contact_name: str
+    beta: ngs.GridFunction | None = None
+    load_form: ngs.LinearForm | None = None
+    load_depends_on_t: bool = False
+    contact_form: ngs.LinearForm | None = None
+    rate_form: ngs.LinearForm | None = None
+    facet_measure: np.ndarray | None = None
+    beta_dofs: np.ndarray | None = None
+    facet_xyz: np.ndarray | None = None
+    node_dofs: np.ndarray = field(default=None)  # (node, component) -> dof
+    node_xyz: np.ndarray = field(default=None)
+    vertex_dofs: np.ndarray = field(default=None)  # (vertex, component) -> dof
+    vertex_xyz: np.ndarray = field(default=None)
+    point_dofs: np.ndarray | None = None  # (component,) dofs of the loaded vertex
+    dirichlet_dofs: np.ndarray = field(default=None)
+    probe_points: object = None
+
+    @property
+    def dim(self) -> int:
+        return self.scene.dim
+
+    @property
+    def ndof(self) -> int:
+        return self.fes.ndof
+
+    def load_vector(self, time: float, out) -> None:
+        """out = F(time): tractions, body force and the point force (out is overwritten)."""
+        if self.load_form is not None:
+            if self.load_depends_on_t:
+                self.t.Set(time)
+                self.load_form.Assemble()
+            out.data = self.load_form.vec
+        else:
+            out[:] = 0.0
+        if self.point_dofs is not None:
+            force = np.atleast_1d(self.scene["point_force"](t=time))
+            arr = out.FV().NumPy()
+            arr[self.point_dofs] += force
+
+    def dirichlet_value(self, time: float) -> float:
+        """Prescribed displacement on Gamma_1 at ``time`` (rod: delta(t); others: 0)."""
+        return self.scene["delta"](t=time) if self.dim == 1 else 0.0
+
+    def normal_displacement(self, uvec: np.ndarray) -> np.ndarray:
+        """u_nu at the contact nodes from a dof vector (1D: u at the rod end)."""
+        if self.dim == 1:
+            return uvec[self.node_dofs[:, 0]]
+        return -uvec[self.node_dofs[:, -1]]  # flat contact side with nu = -e_y (2D) or -e_z (3D)
+
+    def probe_values(self) -> np.ndarray:
+        """u at the probe points, shape (probe, component)."""
+        vals = self.u(self.probe_points)
+        return np.asarray(vals).reshape(len(self.scene["probes"]), self.dim)
+
+
+def _vector_space(scene, mesh, order):
+    clamp = BOUNDARIES[scene.geometry]["clamp"]
+    if scene.dim == 1:
+        return ngs.H1(mesh, order=order, dirichlet=clamp)
+    return ngs.VectorH1(mesh, order=order, dirichlet=clamp)
+
+
+def _vertex_dofs(fes, dim, nv):
+    """dof of (vertex i, component c): vertex dofs come first in each component block."""
+    per_comp = fes.ndof // dim
+    table = np.arange(nv)[:, None] + per_comp * np.arange(dim)[None, :]
+    probe = list(fes.GetDofNrs(ngs.NodeId(ngs.VERTEX, nv - 1)))
+    assert probe == list(table[-1]), "unexpected dof numbering in the displacement space"
+    return table
+
+
+def _boundary_vertices(mesh, name):
+    p1 = ngs.H1(mesh, order=1)
+    return np.nonzero(np.array(p1.GetDofs(mesh.Boundaries(name)), dtype=bool))[0]
+
+
+def _load_form(scene, fes, t):
+    """Tractions and body force as one LinearForm, or None when all are zero."""
+    w = fes.TestFunction()
+    lf = ngs.LinearForm(fes)
+    used, on_t = False, False
+    for side in BOUNDARIES[scene.geometry]["traction"]:
+        expr = scene[f"traction_{side}"]
+        if not expr.is_zero():
+            lf += (ngs.InnerProduct(expr.cf(t), w)).Compile() * ngs.ds(side)
+            used, on_t = True, on_t or expr.depends_on("t")
+    if scene.dim > 1 and not scene["body_force"].is_zero():
+        expr = scene["body_force"]
+        lf += (ngs.InnerProduct(expr.cf(t), w)).Compile() * ngs.dx
+        used, on_t = True, on_t or expr.depends_on("t")
+    if not used:
+        return None, False
+    lf.Assemble()
+    return lf, on_t
+
+
+def build(scene) -> Discretisation:
+    """Assemble the scene's constant parts on its mesh.
+
+    Examples
+    --------
+    >>> from workbench.scenes import scene
+    >>> d = build(scene("tp1", h=0.1))
+    >>> d.ndof, d.beta_dofs.size, d.contact_form is not None
+    (11, 1, True)
+    """
+    mesh = meshes.build(scene)
+    dim, order = scene.dim, scene["order"]
+    fes = _vector_space(scene, mesh, order)
+    u_trial, w = fes.TnT()
+    A, G = kelvin_voigt.tensors(scene)
+    viscous = ngs.BilinearForm(fes, symmetric=True)
+    viscous += kelvin_voigt.energy_product(A, u_trial, w, dim) * ngs.dx
+    elastic = ngs.BilinearForm(fes, symmetric=True)
+    elastic += kelvin_voigt.energy_product(G, u_trial, w, dim) * ngs.dx
+    viscous.Assemble()
+    elastic.Assemble()
+
+    t = ngs.Parameter(0.0)
+    u, v = ngs.GridFunction(fes, "u"), ngs.GridFunction(fes, "velocity")
+    if dim == 1:
+        u.Set(scene["u0"].cf())
+    contact_name = BOUNDARIES[scene.geometry]["contact"]
+    load_form, load_on_t = _load_form(scene, fes, t)
+    d = Discretisation(scene, mesh, fes, t, u, v, viscous, elastic, contact_name,
+                       load_form=load_form, load_depends_on_t=load_on_t)
+
+    ngmesh = mesh.ngmesh  # keep the wrapper alive: Coordinates() is a view into it
+    coords = np.array(ngmesh.Coordinates())[:, :dim]
+    d.vertex_xyz = coords
+    d.vertex_dofs = _vertex_dofs(fes, dim, mesh.nv)
+    nodes = _boundary_vertices(mesh, contact_name)
+    d.node_dofs, d.node_xyz = d.vertex_dofs[nodes], coords[nodes]
+    free = np.array(fes.FreeDofs(), dtype=bool)
+    d.dirichlet_dofs = np.nonzero(~free)[0]
+
+    xs = [np.array([p[i] for p in scene["probes"]]) for i in range(dim)]
+    d.probe_points = mesh(*xs)
+
+    if dim > 1 and not scene["point_force"].is_zero():
+        (at,) = scene["point_force_at"][:1]
+        nearest = int(np.argmin(np.sum((coords - np.asarray(at)) ** 2, axis=1)))
+        d.point_dofs = d.vertex_dofs[nearest]
+
+    terms = scene.terms
+    if "adhesion" in terms:
+        _add_bonding(d)
+    integrand = contact.boundary_integrand(terms, scene, u, d.beta, w)
+    if integrand is not None:
+        d.contact_form = ngs.LinearForm(fes)
+        d.contact_form += integrand.Compile() * ngs.ds(contact_name)
+    return d
+
+
+def _add_bonding(d: Discretisation) -> None:
+    """The beta field (P0 on contact facets; a point value at the 1D rod end) and its rate form."""
+    scene, mesh, name = d.scene, d.mesh, d.contact_name
+    if d.dim == 1:
+        space = ngs.H1(mesh, order=1, definedon=mesh.Boundaries(name))
+    else:
+        space = ngs.SurfaceL2(mesh, order=0, definedon=mesh.Boundaries(name))
+    q = space.TestFunction()
+    measure = ngs.LinearForm(space)
+    measure += q * ngs.ds(name)
+    measure.Assemble()
+    m = measure.vec.FV().NumPy().copy()
+    d.beta_dofs = np.nonzero(m > 0)[0]
+    d.facet_measure = m[d.beta_dofs]
+    xyz = []
+    for c in (ngs.x, ngs.y, ngs.z)[: d.dim]:
+        lf = ngs.LinearForm(space)
+        lf += c * q * ngs.ds(name)
+        lf.Assemble()
+        xyz.append(lf.vec.FV().NumPy()[d.beta_dofs] / d.facet_measure)
+    d.facet_xyz = np.stack(xyz, axis=1)
+    d.beta = ngs.GridFunction(space, "beta")
+    d.beta.vec.FV().NumPy()[d.beta_dofs] = scene["beta0"]
+    v = scene.values
+    u_nu, _ = contact.normal_and_tangential(d.u, contact.outward_normal(d.dim), d.dim)
+    rate = bonding.debonding_rate(d.beta, u_nu, v["gamma_nu"], v["eps_a"], v["L"], v["bonding_truncation"])
+    d.rate_form = ngs.LinearForm(space)
+    d.rate_form += (rate * q).Compile() * ngs.ds(name)

@@ -1,0 +1,242 @@
+"""Safe expressions in x, y, z, t for loads and prescribed displacements.
+
+The grammar (SPEC): numbers, the variables ``x y z t``, ``pi``, the operators
+``+ - * / **`` (``^`` is read as ``**``), parentheses, the functions
+``sin cos tan exp log sqrt abs`` and ``ifpos(a, b, c)`` (``b`` where ``a > 0``,
+else ``c``). A vector is a parenthesised tuple ``(fx, fy)``. Text is parsed
+with :mod:`ast` and walked against this whitelist: nothing is ``eval``-ed.
+
+One parsed :class:`Expression` evaluates two ways: as an NGSolve coefficient
+function of a time :class:`ngsolve.Parameter` (for forms), and with NumPy
+(for references, checks and time-only data such as a rod's end displacement).
+
+Examples
+--------
+>>> e = parse("(0, -sin(50*t))", name="traction_top")
+>>> e.size
+2
+>>> float(e(t=0.0)[1])
+-0.0
+>>> parse("2*ifpos(x - 0.5, 1, 0)")(x=0.75)
+2.0
+"""
+from __future__ import annotations
+
+import ast
+import difflib
+import math
+from dataclasses import dataclass, field
+
+import numpy as np
+
+VARIABLES = ("x", "y", "z", "t")
+FUNCTIONS = ("sin", "cos", "tan", "exp", "log", "sqrt", "abs", "ifpos")
+CONSTANTS = {"pi": math.pi}
+
+
+class ExpressionError(ValueError):
+    """A malformed expression; the message names the parameter and the fault."""
+
+
+_BINOPS = {ast.Add: "+", ast.Sub: "-", ast.Mult: "*", ast.Div: "/", ast.Pow: "**"}
+
+
+@dataclass(frozen=True)
+class Expression:
+    """A parsed scalar or vector expression.
+
+    Attributes
+    ----------
+    source : str
+        The text as given.
+    terms : tuple of ast.AST
+        One checked syntax tree per component.
+    variables : frozenset of str
+        Which of x, y, z, t occur.
+    """
+
+    source: str
+    terms: tuple = field(repr=False)
+    variables: frozenset = frozenset()
+
+    @property
+    def size(self) -> int:
+        """Number of components (1 for a scalar)."""
+        return len(self.terms)
+
+    def depends_on(self, name: str) -> bool:
+        return name in self.variables
+
+    def is_zero(self) -> bool:
+        """True when every component is the literal constant 0."""
+        return all(isinstance(t, ast.Constant) and t.value == 0 for t in self.terms)
+
+    def cf(self, t=0.0, coords=None):
+        """NGSolve coefficient function(s); ``t`` may be a ``Parameter``.
+
+        Returns a scalar CF for size 1, a vector CF otherwise. ``coords`` replaces
+        the coordinates (default ``ngsolve.x, y, z``).
+        """
+        import ngsolve as ngs
+
+        env = dict(zip(VARIABLES, coords or (ngs.x, ngs.y, ngs.z))) | {"t": t}
+        funcs = {
+            "sin": ngs.sin, "cos": ngs.cos, "tan": ngs.tan, "exp": ngs.exp,
+            "log": ngs.log, "sqrt": ngs.sqrt,
+            "abs": lambda a: ngs.IfPos(a, a, -a),
+            "ifpos": ngs.IfPos,
+        }
+        parts = [_walk(term, env, funcs, ngs.CoefficientFunction) for term in self.terms]
+        return parts[0] if len(parts) == 1 else ngs.CoefficientFunction(tuple(parts))
+
+    def __call__(self, x=0.0, y=0.0, z=0.0, t=0.0):
+        """Evaluate with NumPy (broadcasting); a float for a constant scalar."""
+        env = {"x": x, "y": y, "z": z, "t": t}
+        funcs = {
+            "sin": np.sin, "cos": np.cos, "tan": np.tan, "exp": np.exp, "log": np.log,
+            "sqrt": np.sqrt, "abs": np.abs,
+            "ifpos": lambda a, b, c: np.where(np.asarray(a) > 0, b, c),
+        }
+        parts = [_walk(term, env, funcs, float) for term in self.terms]
+        if len(parts) == 1:
+            value = parts[0]
+            return float(value) if np.ndim(value) == 0 else np.asarray(value, dtype=float)
+        shape = np.broadcast(*parts).shape
+        return np.stack([np.broadcast_to(np.asarray(p, dtype=float), shape) for p in parts])
+
+    def __str__(self) -> str:
+        return self.source
+
+
+def _walk(node, env, funcs, const):
+    if isinstance(node, ast.Constant):
+        return const(node.value)
+    if isinstance(node, ast.Name):
+        if node.id in CONSTANTS:
+            return const(CONSTANTS[node.id])
+        return env[node.id]
+    if isinstance(node, ast.UnaryOp):
+        operand = _walk(node.operand, env, funcs, const)
+        return -operand if isinstance(node.op, ast.USub) else operand
+    if isinstance(node, ast.BinOp):
+        a = _walk(node.left, env, funcs, const)
+        b = _walk(node.right, env, funcs, const)
+        op = _BINOPS[type(node.op)]
+        if op == "+":
+            return a + b
+        if op == "-":
+            return a - b
+        if op == "*":
+            return a * b
+        if op == "/":
+            return a / b
+        return a**b
+    if isinstance(node, ast.Call):
+        args = [_walk(a, env, funcs, const) for a in node.args]
+        return funcs[node.func.id](*args)
+    raise AssertionError(f"unchecked node {type(node).__name__}")  # _check rejects these
+
+
+def _check(node, text, name, allowed):
+    """Reject anything outside the grammar, naming the parameter and the token."""
+    where = f"in {name} = {text!r}" if name else f"in {text!r}"
+    if isinstance(node, ast.Constant):
+        if isinstance(node.value, bool) or not isinstance(node.value, (int, float)):
+            raise ExpressionError(f"{where}: only numbers are allowed as constants, got {node.value!r}")
+        if not math.isfinite(node.value):
+            raise ExpressionError(f"{where}: constant {node.value!r} is not finite")
+        return
+    if isinstance(node, ast.Name):
+        if node.id in CONSTANTS or node.id in allowed:
+            return
+        known = list(allowed) + list(CONSTANTS)
+        hint = difflib.get_close_matches(node.id, known + list(FUNCTIONS), n=1)
+        extra = f"; did you mean {hint[0]!r}?" if hint else ""
+        raise ExpressionError(
+            f"{where}: unknown name {node.id!r} (allowed variables: {', '.join(allowed)}, constant: pi){extra}")
+    if isinstance(node, ast.UnaryOp) and isinstance(node.op, (ast.USub, ast.UAdd)):
+        _check(node.operand, text, name, allowed)
+        return
+    if isinstance(node, ast.BinOp) and type(node.op) in _BINOPS:
+        _check(node.left, text, name, allowed)
+        _check(node.right, text, name, allowed)
+        return
+    if isinstance(node, ast.Call):
+        if not isinstance(node.func, ast.Name) or node.func.id not in FUNCTIONS:
+            fname = node.func.id if isinstance(node.func, ast.Name) else ast.unparse(node.func)
+            hint = difflib.get_close_matches(fname, FUNCTIONS, n=1)
+            extra = f"; did you mean {hint[0]!r}?" if hint else ""
+            raise ExpressionError(
+                f"{where}: unknown function {fname!r} (allowed: {', '.join(FUNCTIONS)}){extra}")
+        want = 3 if node.func.id == "ifpos" else 1
+        if node.keywords or len(node.args) != want:
+            raise ExpressionError(f"{where}: {node.func.id}() takes {want} argument(s)")
+        for a in node.args:
+            _check(a, text, name, allowed)
+        return
+    raise ExpressionError(f"{where}: {type(node).__name__} is not allowed in an expression")
+
+
+def parse(text, *, name: str = "", allowed=VARIABLES, size: int | None = None) -> Expression:
+    """Parse ``text`` (a string, a number, or a tuple/list of them) into an :class:`Expression`.
+
+    Parameters
+    ----------
+    text : str, float or sequence
+        The expression. Numbers and sequences of numbers/strings are accepted as is.
+    name : str
+        Parameter name, used in error messages.
+    allowed : sequence of str
+        Variables the expression may use (e.g. only ``("t",)`` for a rod-end displacement).
+    size : int, optional
+        Required number of components; a scalar 0 is broadcast to a zero vector.
+
+    Raises
+    ------
+    ExpressionError
+        On any syntax outside the grammar, an unknown name, or a wrong size.
+    """
+    if isinstance(text, Expression):
+        expr = text
+    else:
+        if isinstance(text, (list, tuple)):
+            source = "(" + ", ".join(str(_as_text(v, name)) for v in text) + ")"
+        else:
+            source = str(_as_text(text, name))
+        src = source.replace("^", "**").strip()
+        if not src:
+            raise ExpressionError(f"{name or 'expression'} is empty")
+        try:
+            tree = ast.parse(src, mode="eval").body
+        except SyntaxError as err:
+            raise ExpressionError(f"in {name} = {source!r}: syntax error ({err.msg})") from None
+        terms = tuple(tree.elts) if isinstance(tree, ast.Tuple) else (tree,)
+        if not terms:
+            raise ExpressionError(f"in {name} = {source!r}: empty tuple")
+        for term in terms:
+            _check(term, source, name, allowed)
+        used = frozenset(n.id for term in terms for n in ast.walk(term)
+                         if isinstance(n, ast.Name) and n.id in VARIABLES)
+        expr = Expression(source, terms, used)
+    bad = [v for v in expr.variables if v not in allowed]
+    if bad:
+        raise ExpressionError(f"in {name} = {expr.source!r}: {bad[0]!r} not allowed here (allowed: {', '.join(allowed)})")
+    if size is not None and expr.size != size:
+        if expr.size == 1 and expr.is_zero():
+            return Expression(expr.source, expr.terms * size, expr.variables)
+        raise ExpressionError(
+            f"{name} = {expr.source!r} has {expr.size} component(s), {size} are needed"
+            + (f", e.g. '({', '.join(['0'] * size)})'" if size > 1 else ""))
+    return expr
+
+
+def _as_text(value, name):
+    if isinstance(value, bool):
+        raise ExpressionError(f"{name}: expected an expression, got {value!r}")
+    if isinstance(value, (int, float)):
+        if not math.isfinite(value):
+            raise ExpressionError(f"{name} = {value!r} is not finite")
+        return repr(float(value))
+    if isinstance(value, str):
+        return value
+    raise ExpressionError(f"{name}: expected an expression (text or number), got {type(value).__name__}")

@@ -1,0 +1,237 @@
+"""Every scene parameter: its name (as in SPEC), default, unit, meaning and allowed range.
+
+This table is the single place where a parameter is defined. Scenes pick the
+names their geometry and model use; values are coerced (text from the command
+line or TOML becomes numbers, flags or expressions) and checked here, before any
+mesh is built, so a bad value fails with a message naming the parameter and its
+allowed range.
+
+Examples
+--------
+>>> PARAMETERS["nu"].check(0.3)
+0.3
+>>> PARAMETERS["nu"].check(0.5)
+Traceback (most recent call last):
+...
+workbench.parameters.ParameterError: nu = 0.5 is outside the allowed range -1 < nu < 0.5
+"""
+from __future__ import annotations
+
+import difflib
+import json
+import math
+from dataclasses import dataclass
+
+from .expressions import Expression, ExpressionError, parse
+
+
+class ParameterError(ValueError):
+    """A bad parameter value or name; the message names the parameter and the allowed range."""
+
+
+@dataclass(frozen=True)
+class Param:
+    """One parameter.
+
+    ``kind`` is one of ``float``, ``int``, ``flag``, ``choice``, ``expr``
+    (scalar expression), ``vector`` (vector expression, size set by the
+    geometry), ``points`` (a list of coordinate tuples) or ``times`` (a list of
+    times). ``lower``/``upper`` bound numbers; ``*_open`` says whether the bound
+    itself is excluded.
+    """
+
+    name: str
+    default: object
+    unit: str
+    meaning: str
+    kind: str = "float"
+    lower: float | None = None
+    upper: float | None = None
+    lower_open: bool = False
+    upper_open: bool = False
+    choices: tuple = ()
+    variables: tuple = ("x", "y", "z", "t")
+
+    def range_text(self) -> str:
+        """The allowed range in words, for messages and ``workbench show``."""
+        if self.kind == "choice":
+            return " | ".join(repr(c) for c in self.choices)
+        if self.kind == "flag":
+            return "true | false"
+        if self.kind in ("expr", "vector"):
+            return "expression in " + ", ".join(self.variables)
+        if self.lower is None and self.upper is None:
+            return "any finite number" if self.kind in ("float", "int") else ""
+        parts = []
+        if self.lower is not None:
+            parts.append(f"{_fmt(self.lower)} {'<' if self.lower_open else '<='}")
+        parts.append(self.name)
+        if self.upper is not None:
+            parts.append(f"{'<' if self.upper_open else '<='} {_fmt(self.upper)}")
+        return " ".join(parts)
+
+    def check(self, value, size: int | None = None):
+        """Coerce ``value`` to this parameter's kind and check its range."""
+        name = self.name
+        if self.kind in ("float", "int"):
+            if isinstance(value, str):
+                try:
+                    value = float(value.strip())
+                except ValueError:
+                    raise ParameterError(f"{name} = {value!r} is not a number") from None
+            if isinstance(value, bool) or not isinstance(value, (int, float)) and not hasattr(value, "__float__"):
+                raise ParameterError(f"{name} = {value!r} is not a number")
+            value = float(value)
+            if not math.isfinite(value):
+                raise ParameterError(f"{name} = {value} is not finite; allowed: {self.range_text()}")
+            if self.kind == "int":
+                if value != int(value):
+                    raise ParameterError(f"{name} = {value} must be an integer; allowed: {self.range_text()}")
+                value = int(value)
+            lo, hi = self.lower, self.upper
+            bad_lo = lo is not None and (value <= lo if self.lower_open else value < lo)
+            bad_hi = hi is not None and (value >= hi if self.upper_open else value > hi)
+            if bad_lo or bad_hi:
+                raise ParameterError(f"{name} = {_fmt(value)} is outside the allowed range {self.range_text()}")
+            return value
+        if self.kind == "flag":
+            if isinstance(value, str):
+                low = value.strip().lower()
+                if low in ("1", "true", "yes", "on"):
+                    return True
+                if low in ("0", "false", "no", "off"):
+                    return False
+            elif isinstance(value, (bool, int)) and value in (0, 1):
+                return bool(value)
+            raise ParameterError(f"{name} = {value!r} is not a flag; allowed: true | false")
+        if self.kind == "choice":
+            if value in self.choices:
+                return value
+            hint = difflib.get_close_matches(str(value), [str(c) for c in self.choices], n=1)
+            extra = f"; did you mean {hint[0]!r}?" if hint else ""
+            raise ParameterError(f"{name} = {value!r} is not allowed; choose one of {self.range_text()}{extra}")
+        if self.kind in ("expr", "vector"):
+            try:
+                return parse(value, name=name, allowed=self.variables,
+                             size=(1 if self.kind == "expr" else size))
+            except ExpressionError as err:
+                raise ParameterError(str(err)) from None
+        if self.kind == "points":
+            return _points(name, value)
+        if self.kind == "times":
+            return _times(name, value)
+        raise AssertionError(self.kind)
+
+
+def _fmt(v) -> str:
+    return f"{v:g}" if isinstance(v, float) else str(v)
+
+
+def _points(name, value):
+    if isinstance(value, str):
+        text = value.strip()
+        try:
+            value = json.loads(text)
+        except json.JSONDecodeError:
+            # "(1, 0.1); (0.5, 0)" on the command line
+            try:
+                value = [[float(c) for c in p.strip().strip("()[]").split(",")]
+                         for p in text.split(";") if p.strip()]
+            except ValueError:
+                raise ParameterError(f"{name} = {text!r}: give points as '(x, y); (x, y)' or a JSON list") from None
+    try:
+        pts = tuple(tuple(float(c) for c in (p if isinstance(p, (list, tuple)) else [p])) for p in value)
+    except (TypeError, ValueError):
+        raise ParameterError(f"{name} = {value!r}: expected a list of coordinate tuples") from None
+    if any(not math.isfinite(c) for p in pts for c in p):
+        raise ParameterError(f"{name}: coordinates must be finite")
+    return pts
+
+
+def _times(name, value):
+    if isinstance(value, str):
+        value = [v for v in value.replace(";", ",").split(",") if v.strip()]
+    try:
+        ts = tuple(float(v) for v in (value if hasattr(value, "__iter__") else [value]))
+    except (TypeError, ValueError):
+        raise ParameterError(f"{name} = {value!r}: expected a list of times") from None
+    if any(not math.isfinite(t) or t < 0 for t in ts):
+        raise ParameterError(f"{name}: times must be finite and >= 0")
+    return ts
+
+
+def _p(name, default, unit, meaning, kind="float", **kw) -> Param:
+    return Param(name, default, unit, meaning, kind, **kw)
+
+
+_POS = dict(lower=0.0, lower_open=True)
+_NONNEG = dict(lower=0.0)
+
+#: Every parameter any scene may use, by name.
+PARAMETERS: dict[str, Param] = {p.name: p for p in [
+    # geometry and mesh
+    _p("length", 1.0, "m", "rod length", **_POS),
+    _p("width", 1.0, "m", "body extent in x", **_POS),
+    _p("depth", 0.2, "m", "body extent in y (3D block)", **_POS),
+    _p("height", 0.1, "m", "body extent in y (2D slab) or z (3D block)", **_POS),
+    _p("h", 0.01, "m", "target element size (cells per side = round(side / h))", **_POS),
+    _p("nx", 0, "1", "cells along x; 0 = from h", "int", lower=0),
+    _p("ny", 0, "1", "cells along y; 0 = from h", "int", lower=0),
+    _p("nz", 0, "1", "cells along z (3D); 0 = from h", "int", lower=0),
+    _p("order", 1, "1", "polynomial order of the displacement elements", "int", lower=1, upper=4),
+    # time
+    _p("T", 1.0, "s", "final time", **_POS),
+    _p("k", 0.01, "s", "time step (uniform grid; the last step is not longer than k)", **_POS),
+    _p("scheme", "explicit", "", "time scheme: the paper's (viscous term implicit, contact terms lagged)",
+       "choice", choices=("explicit",)),
+    # material
+    _p("E", 1000.0, "Pa", "Young's modulus (elasticity G)", **_POS),
+    _p("nu", 0.3, "1", "Poisson's ratio (elasticity G)", lower=-1.0, upper=0.5, lower_open=True, upper_open=True),
+    _p("a1", 30.0, "Pa s", "viscosity: coefficient of tr(eps') I", **_NONNEG),
+    _p("a2", 20.0, "Pa s", "viscosity: coefficient of eps'", **_POS),
+    _p("a", 1.0, "Pa", "rod elastic modulus (sigma = a u_x + b u_xt)", **_POS),
+    _p("b", 1.0, "Pa s", "rod viscosity (sigma = a u_x + b u_xt)", **_POS),
+    # contact physics on Gamma_3
+    _p("contact", True, "", "normal compliance of the foundation is modelled", "flag"),
+    _p("adhesion", True, "", "bonding field beta and adhesive tractions are modelled", "flag"),
+    _p("c_nu", 1.0, "Pa/m^m", "normal compliance stiffness: p_nu(r) = c_nu ((r - gap)_+)^m_nu", **_NONNEG),
+    _p("m_nu", 1.0, "1", "normal compliance exponent", lower=1.0),
+    _p("gap", 0.0, "m", "initial gap between the contact surface and the foundation", **_NONNEG),
+    _p("gamma_nu", 0.3, "Pa/m", "adhesion coefficient", **_NONNEG),
+    _p("eps_a", 0.0, "J/m^2", "limit bond energy (below it nothing debonds)", **_NONNEG),
+    _p("L", 0.3, "m", "characteristic bond length (truncation R)", **_POS),
+    _p("beta0", 1.0, "1", "initial bonding field", lower=0.0, upper=1.0, lower_open=True),
+    _p("c_tau", 0.0, "Pa/m", "tangential glue stiffness: p_tau(beta) = c_tau beta", **_NONNEG),
+    _p("bonding_truncation", "tension", "", "R in the bonding law: symmetric clip (eq. 3.7 as printed) or tension only",
+       "choice", choices=("tension", "symmetric")),
+    # loads and prescribed displacements
+    _p("delta", "0", "m", "prescribed rod-end displacement u(0, t)", "expr", variables=("t",)),
+    _p("u0", "0", "m", "initial displacement (rod: must equal delta(0) at x = 0)", "expr", variables=("x", "y", "z")),
+    _p("body_force", "0", "N/m^3", "volume force f0", "vector", variables=("x", "y", "z", "t")),
+    _p("traction_top", "0", "N/m^2", "traction on the top side", "vector"),
+    _p("traction_right", "0", "N/m^2", "traction on the right side (x = width)", "vector"),
+    _p("traction_front", "0", "N/m^2", "traction on the front side (y = 0, 3D)", "vector"),
+    _p("traction_back", "0", "N/m^2", "traction on the back side (y = depth, 3D)", "vector"),
+    _p("point_force", "0", "N", "concentrated force applied as a nodal force at point_force_at", "vector",
+       variables=("t",)),
+    _p("point_force_at", (), "m", "where point_force acts (nearest mesh vertex); default: the top-right corner",
+       "points"),
+    # output
+    _p("probes", (), "m", "points where u is recorded every step", "points"),
+    _p("snapshots", (), "s", "times at which whole fields are stored (T is always stored)", "times"),
+]}
+
+
+def closest_name(name: str, known) -> str:
+    """A 'did you mean' suffix for an unknown name, or ''."""
+    hint = difflib.get_close_matches(name, list(known), n=1, cutoff=0.6)
+    return f"; did you mean {hint[0]!r}?" if hint else ""
+
+
+def to_plain(value):
+    """A JSON-able form of a checked value (expressions become their text)."""
+    if isinstance(value, Expression):
+        return value.source
+    if isinstance(value, tuple):
+        return [to_plain(v) for v in value]
+    return value

@@ -1,0 +1,274 @@
+"""The result Dataset: its schema (one place), how a run fills it, and netCDF archiving.
+
+Schema (SPEC contract, extended):
+
+========================================  =====================================================
+``time``                                  recorded times [s]; ``step`` holds the step index
+``u_probe(time, probe, component)``       displacement at the probe points [m]
+``u_contact(time, node, component)``      displacement at the contact-boundary vertices [m]
+``beta(time, facet)``                     bonding field on the contact facets (if modelled)
+``u_nodes(snapshot, vertex, component)``  whole displacement field at the snapshot times [m]
+``stress(snapshot, cell, stress_component)``  P0 stress sigma_h = P_Q[...] [Pa]
+``von_mises(snapshot, cell)``             von Mises norm of sigma_h [Pa]
+``u_dofs(snapshot, dof)``                 the displacement dof vector (exact field reconstruction)
+``cell_vertices(cell, corner)``           mesh connectivity, with ``vertex_x/y/z`` coordinates
+========================================  =====================================================
+
+Dataset attributes hold every scene parameter under its own name (expressions
+as text, flags as 0/1, lists as JSON), the discretisation (``scheme``, ``h_max``,
+``k_actual``, ``ndof``, ``nsteps``, ``cells``), cost (``wall_time``, ``cpu_time``),
+``status`` ("complete" or "incomplete") with ``failure``, package versions and a
+``history`` line. netCDF cannot hold dicts, bools or None as attributes, so the
+schema stores only str, int, float.
+"""
+from __future__ import annotations
+
+import json
+import os
+import tempfile
+import time as _time
+from datetime import datetime, timezone
+from pathlib import Path
+
+import numpy as np
+import xarray as xr
+
+from .parameters import to_plain
+
+COMPONENTS = ("x", "y", "z")
+STRESS_COMPONENTS = {1: ("xx",), 2: ("xx", "yy", "xy"), 3: ("xx", "yy", "zz", "yz", "xz", "xy")}
+_STRESS_INDEX = {1: [(0, 0)], 2: [(0, 0), (1, 1), (0, 1)],
+                 3: [(0, 0), (1, 1), (2, 2), (1, 2), (0, 2), (0, 1)]}
+
+#: (units, long_name) of every variable and coordinate the schema knows.
+VARIABLES = {
+    "time": ("s", "time"),
+    "step": ("1", "time step index"),
+    "u_probe": ("m", "displacement at probe points"),
+    "u_contact": ("m", "displacement at contact-boundary vertices"),
+    "beta": ("1", "bonding field on contact facets"),
+    "u_nodes": ("m", "displacement at mesh vertices"),
+    "u_dofs": ("m", "displacement degrees of freedom"),
+    "stress": ("Pa", "stress, piecewise constant (P_Q projection)"),
+    "von_mises": ("Pa", "von Mises norm of the stress"),
+    "cell_vertices": ("1", "vertex indices of each cell"),
+    "snapshot_time": ("s", "time of the field snapshot"),
+    "newton_iterations": ("1", "Newton iterations in the time step"),
+    "probe_x": ("m", "probe x"), "probe_y": ("m", "probe y"), "probe_z": ("m", "probe z"),
+    "node_x": ("m", "contact vertex x"), "node_y": ("m", "contact vertex y"), "node_z": ("m", "contact vertex z"),
+    "facet_x": ("m", "contact facet midpoint x"), "facet_y": ("m", "contact facet midpoint y"),
+    "vertex_x": ("m", "vertex x"), "vertex_y": ("m", "vertex y"), "vertex_z": ("m", "vertex z"),
+}
+
+
+def _var(dims, data, name):
+    units, long_name = VARIABLES[name]
+    return xr.Variable(dims, data, attrs={"units": units, "long_name": long_name})
+
+
+def attr_value(value):
+    """A netCDF-safe attribute: bools as 0/1, None as '', containers as JSON text."""
+    value = to_plain(value)
+    if isinstance(value, bool):
+        return int(value)
+    if value is None:
+        return ""
+    if isinstance(value, (int, float, str, np.integer, np.floating)):
+        return value
+    return json.dumps(value)
+
+
+def versions() -> dict:
+    import importlib.metadata as md
+
+    out = {}
+    for pkg in ("workbench", "ngsolve", "numpy", "scipy", "xarray", "netCDF4"):
+        try:
+            out[f"version_{pkg}"] = md.version(pkg)
+        except md.PackageNotFoundError:
+            out[f"version_{pkg}"] = "unknown"
+    return out
+
+
+class Recorder:
+    """Collects a run's records into preallocated arrays and builds the Dataset.
+
+    ``record_steps`` and ``snapshot_steps`` are the step indices to keep; the
+    scheme calls :meth:`record` / :meth:`snapshot` at those steps only.
+    """
+
+    def __init__(self, disc, times, record_steps, snapshot_steps):
+        self.disc = disc
+        self.times = np.asarray(times)
+        self.record_steps = np.asarray(sorted(set(int(s) for s in record_steps)))
+        self.snapshot_steps = np.asarray(sorted(set(int(s) for s in snapshot_steps)))
+        self._want_record = set(self.record_steps.tolist())
+        self._want_snapshot = set(self.snapshot_steps.tolist())
+        n, dim = len(self.record_steps), disc.dim
+        self.u_probe = np.full((n, len(disc.scene["probes"]), dim), np.nan)
+        self.u_contact = np.full((n, len(disc.node_dofs), dim), np.nan)
+        self.beta = np.full((n, len(disc.beta_dofs)), np.nan) if disc.beta is not None else None
+        self.extra = {}  # per-record diagnostics, e.g. newton_iterations
+        self.n_recorded = 0
+        self.snaps = []  # (time, u_dofs, stress, von_mises)
+
+    def wants(self, step: int) -> bool:
+        return step in self._want_record
+
+    def wants_snapshot(self, step: int) -> bool:
+        return step in self._want_snapshot
+
+    def record(self, step: int, **diagnostics) -> None:
+        d, i = self.disc, self.n_recorded
+        u = d.u.vec.FV().NumPy()
+        self.u_probe[i] = d.probe_values()
+        self.u_contact[i] = u[d.node_dofs]
+        if self.beta is not None:
+            self.beta[i] = d.beta.vec.FV().NumPy()[d.beta_dofs]
+        for key, val in diagnostics.items():
+            self.extra.setdefault(key, np.full(len(self.record_steps), -1, dtype=type(val)))[i] = val
+        self.n_recorded += 1
+
+    def snapshot(self, step: int, stress_cf) -> None:
+        """Keep the whole field; ``stress_cf`` is the scheme's sigma_n as a coefficient function."""
+        import ngsolve as ngs
+
+        from .physics.kelvin_voigt import von_mises
+
+        d = self.disc
+        q = ngs.L2(d.mesh, order=0)
+        dim = d.dim
+        comps = []
+        for (i, j) in _STRESS_INDEX[dim]:
+            g = ngs.GridFunction(q)
+            g.Set(stress_cf if dim == 1 else stress_cf[i, j])  # local L2 projection = P_Q on P0
+            comps.append(g.vec.FV().NumPy().copy())
+        vm = ngs.GridFunction(q)
+        stress_p0 = _p0_tensor(comps, dim)
+        vm.Set(von_mises(stress_p0(q), dim))
+        self.snaps.append((self.times[step], d.u.vec.FV().NumPy().copy(), np.stack(comps, axis=1),
+                           vm.vec.FV().NumPy().copy()))
+
+    def dataset(self, attrs: dict) -> xr.Dataset:
+        """The Dataset of everything recorded so far (``attrs`` already netCDF-safe)."""
+        d, n = self.disc, self.n_recorded
+        dim = d.dim
+        comp = list(COMPONENTS[:dim])
+        steps = self.record_steps[:n]
+        probes = np.asarray(d.scene["probes"], dtype=float).reshape(-1, dim)
+        coords = {
+            "time": _var("time", self.times[steps], "time"),
+            "step": _var("time", steps, "step"),
+            "component": ("component", comp),
+            "probe": ("probe", np.arange(len(probes))),
+            "node": ("node", np.arange(len(d.node_dofs))),
+        }
+        for c in range(dim):
+            coords[f"probe_{COMPONENTS[c]}"] = _var("probe", probes[:, c], f"probe_{COMPONENTS[c]}")
+            coords[f"node_{COMPONENTS[c]}"] = _var("node", d.node_xyz[:, c], f"node_{COMPONENTS[c]}")
+        data = {
+            "u_probe": _var(("time", "probe", "component"), self.u_probe[:n], "u_probe"),
+            "u_contact": _var(("time", "node", "component"), self.u_contact[:n], "u_contact"),
+        }
+        if self.beta is not None:
+            coords["facet"] = ("facet", np.arange(self.beta.shape[1]))
+            for c in range(2 if dim == 3 else 1):  # facets lie on y = 0 (2D) or z = 0 (3D)
+                coords[f"facet_{COMPONENTS[c]}"] = _var("facet", d.facet_xyz[:, c], f"facet_{COMPONENTS[c]}")
+            data["beta"] = _var(("time", "facet"), self.beta[:n], "beta")
+        for key, arr in self.extra.items():
+            data[key] = _var("time", arr[:n], key)
+        if self.snaps:
+            coords["snapshot_time"] = _var("snapshot", np.array([s[0] for s in self.snaps]), "snapshot_time")
+            coords["stress_component"] = ("stress_component", list(STRESS_COMPONENTS[dim]))
+            vxyz = d.vertex_xyz
+            for c in range(dim):
+                coords[f"vertex_{COMPONENTS[c]}"] = _var("vertex", vxyz[:, c], f"vertex_{COMPONENTS[c]}")
+            data["cell_vertices"] = _var(("cell", "corner"), _cells(d.mesh, dim), "cell_vertices")
+            data["u_dofs"] = _var(("snapshot", "dof"), np.stack([s[1] for s in self.snaps]), "u_dofs")
+            vd = d.vertex_dofs
+            data["u_nodes"] = _var(("snapshot", "vertex", "component"),
+                                   np.stack([s[1][vd] for s in self.snaps]), "u_nodes")
+            data["stress"] = _var(("snapshot", "cell", "stress_component"),
+                                  np.stack([s[2] for s in self.snaps]), "stress")
+            data["von_mises"] = _var(("snapshot", "cell"), np.stack([s[3] for s in self.snaps]), "von_mises")
+        return xr.Dataset(data, coords=coords, attrs=attrs)
+
+
+def _p0_tensor(comps, dim):
+    """A function building sigma as a CF from P0 component vectors on a given L2 space."""
+    import ngsolve as ngs
+
+    def build(q):
+        gfs = []
+        for arr in comps:
+            g = ngs.GridFunction(q)
+            g.vec.FV().NumPy()[:] = arr
+            gfs.append(g)
+        if dim == 1:
+            return gfs[0]
+        full = [[None] * dim for _ in range(dim)]
+        for g, (i, j) in zip(gfs, _STRESS_INDEX[dim]):
+            full[i][j] = full[j][i] = g
+        return ngs.CoefficientFunction(tuple(full[i][j] for i in range(dim) for j in range(dim)), dims=(dim, dim))
+
+    return build
+
+
+def _cells(mesh, dim):
+    ngm = mesh.ngmesh
+    elems = {1: ngm.Elements1D, 2: ngm.Elements2D, 3: ngm.Elements3D}[dim]().NumPy()
+    return np.array(elems["nodes"][:, : dim + 1], dtype=np.int64) - 1
+
+
+def provenance(scene, extra: dict) -> dict:
+    """Dataset attributes: every scene parameter, discretisation, cost and versions."""
+    attrs = {"scene": scene.name, "base_scene": scene.base, "geometry": scene.geometry,
+             "description": scene.description, "model": "A", "terms": ",".join(scene.terms) or "none"}
+    attrs |= {k: attr_value(v) for k, v in scene.values.items()}
+    attrs["parameters_json"] = json.dumps(scene.plain(), sort_keys=True)
+    attrs |= {k: attr_value(v) for k, v in extra.items()}
+    attrs |= versions()
+    stamp = datetime.now(timezone.utc).strftime("%Y-%m-%dT%H:%M:%SZ")
+    attrs["history"] = f"{stamp} workbench run {scene.name}"
+    return attrs
+
+
+def write(ds: xr.Dataset, path) -> Path:
+    """Write ``ds`` to netCDF atomically: a temporary file in the same folder, then a rename."""
+    path = Path(path)
+    path.parent.mkdir(parents=True, exist_ok=True)
+    fd, tmp = tempfile.mkstemp(prefix=f".{path.name}.", suffix=".tmp", dir=path.parent)
+    os.close(fd)
+    try:
+        ds.to_netcdf(tmp, engine="netcdf4")
+        os.replace(tmp, path)
+    except BaseException:
+        Path(tmp).unlink(missing_ok=True)
+        raise
+    return path
+
+
+def load(path) -> xr.Dataset:
+    """Read an archive written by :func:`write` (fully into memory, file closed).
+
+    Examples
+    --------
+    >>> import tempfile, workbench
+    >>> ds = workbench.run("tp1", h=0.1, k=0.1, progress=False)
+    >>> p = write(ds, tempfile.mkdtemp() + "/tp1.nc")
+    >>> xr.testing.assert_identical(load(p), ds)
+    """
+    with xr.open_dataset(path, engine="netcdf4", decode_times=False, decode_timedelta=False) as ds:
+        return ds.load()
+
+
+class Clock:
+    """Wall and CPU time of a block."""
+
+    def __enter__(self):
+        self.wall0, self.cpu0 = _time.perf_counter(), _time.process_time()
+        return self
+
+    def __exit__(self, *exc):
+        self.wall = _time.perf_counter() - self.wall0
+        self.cpu = _time.process_time() - self.cpu0
