@@ -33,8 +33,7 @@ class Discretisation:
     elastic: ngs.BilinearForm
     contact_name: str
     beta: ngs.GridFunction | None = None
-    load_form: ngs.LinearForm | None = None
-    load_depends_on_t: bool = False
+    loads: Loads | None = None
     contact_form: ngs.LinearForm | None = None
     rate_form: ngs.LinearForm | None = None
     facet_measure: np.ndarray | None = None
@@ -44,7 +43,6 @@ class Discretisation:
     node_xyz: np.ndarray = field(default=None)
     vertex_dofs: np.ndarray = field(default=None)  # (vertex, component) -> dof
     vertex_xyz: np.ndarray = field(default=None)
-    point_dofs: np.ndarray | None = None  # (component,) dofs of the loaded vertex
     dirichlet_dofs: np.ndarray = field(default=None)
     probe_points: object = None
 
@@ -58,17 +56,7 @@ class Discretisation:
 
     def load_vector(self, time: float, out) -> None:
         """out = F(time): tractions, body force and the point force (out is overwritten)."""
-        if self.load_form is not None:
-            if self.load_depends_on_t:
-                self.t.Set(time)
-                self.load_form.Assemble()
-            out.data = self.load_form.vec
-        else:
-            out[:] = 0.0
-        if self.point_dofs is not None:
-            force = np.atleast_1d(self.scene["point_force"](t=time))
-            arr = out.FV().NumPy()
-            arr[self.point_dofs] += force
+        self.loads.vector(time, out)
 
     def dirichlet_value(self, time: float) -> float:
         """Prescribed displacement on Gamma_1 at ``time`` (rod: delta(t); others: 0)."""
@@ -107,24 +95,78 @@ def _boundary_vertices(mesh, name):
     return np.nonzero(np.array(p1.GetDofs(mesh.Boundaries(name)), dtype=bool))[0]
 
 
-def _load_form(scene, fes, t):
-    """Tractions and body force as one LinearForm, or None when all are zero."""
-    w = fes.TestFunction()
-    lf = ngs.LinearForm(fes)
-    used, on_t = False, False
-    for side in BOUNDARIES[scene.geometry]["traction"]:
-        expr = scene[f"traction_{side}"]
-        if not expr.is_zero():
-            lf += (ngs.InnerProduct(expr.cf(t), w)).Compile() * ngs.ds(side)
-            used, on_t = True, on_t or expr.depends_on("t")
-    if scene.dim > 1 and not scene["body_force"].is_zero():
-        expr = scene["body_force"]
-        lf += (ngs.InnerProduct(expr.cf(t), w)).Compile() * ngs.dx
-        used, on_t = True, on_t or expr.depends_on("t")
-    if not used:
-        return None, False
-    lf.Assemble()
-    return lf, on_t
+class Loads:
+    """F(t) = (tractions and body force, w) plus a nodal point force, evaluated cheaply per step.
+
+    A load whose expression does not depend on x, y, z is g(t) times a fixed
+    vector: its per-component vectors are assembled once (stored sparse) and a
+    step only evaluates g(t). Loads that vary in space and time are collected
+    in one LinearForm assembled per step; space-only ones in one assembled once.
+    """
+
+    def __init__(self, scene, fes, t, vertex_dofs, vertex_xyz):
+        self.scene, self.t = scene, t
+        self.separable = []  # (expression, component, dof indices, values)
+        varying = ngs.LinearForm(fes)
+        fixed = ngs.LinearForm(fes)
+        n_varying = n_fixed = 0
+        w = fes.TestFunction()
+        dim = scene.dim
+        pieces = [(scene[f"traction_{side}"], ngs.ds(side)) for side in BOUNDARIES[scene.geometry]["traction"]]
+        if dim > 1:
+            pieces.append((scene["body_force"], ngs.dx))
+        for expr, region in pieces:
+            if expr.is_zero():
+                continue
+            if not expr.variables & {"x", "y", "z"}:
+                for c in range(dim):
+                    unit = ngs.LinearForm(fes)
+                    unit += w[c] * region
+                    unit.Assemble()
+                    vec = unit.vec.FV().NumPy()
+                    idx = np.nonzero(vec)[0]
+                    self.separable.append((expr, c, idx, vec[idx].copy()))
+            elif expr.depends_on("t"):
+                varying += ngs.InnerProduct(expr.cf(t), w).Compile() * region
+                n_varying += 1
+            else:
+                fixed += ngs.InnerProduct(expr.cf(t), w).Compile() * region
+                n_fixed += 1
+        self.varying = varying if n_varying else None
+        self.fixed = None
+        if n_fixed:
+            fixed.Assemble()
+            self.fixed = fixed.vec.FV().NumPy().copy()
+        self.point_dofs = None
+        if dim > 1 and not scene["point_force"].is_zero():
+            at = np.asarray(scene["point_force_at"][0])
+            nearest = int(np.argmin(np.sum((vertex_xyz - at) ** 2, axis=1)))
+            self.point_dofs = vertex_dofs[nearest]
+
+    @property
+    def empty(self) -> bool:
+        return not self.separable and self.varying is None and self.fixed is None and self.point_dofs is None
+
+    def vector(self, time: float, out) -> None:
+        """out = F(time) (an NGSolve vector, overwritten)."""
+        arr = out.FV().NumPy()
+        if self.varying is not None:
+            self.t.Set(time)
+            self.varying.Assemble()
+            arr[:] = self.varying.vec.FV().NumPy()
+        else:
+            arr[:] = 0.0
+        if self.fixed is not None:
+            arr += self.fixed
+        values = {}
+        for expr, c, idx, vals in self.separable:
+            if id(expr) not in values:  # evaluate each expression once per step
+                values[id(expr)] = np.atleast_1d(expr(t=time))
+            g = values[id(expr)][c]
+            if g != 0.0:
+                arr[idx] += g * vals
+        if self.point_dofs is not None:
+            arr[self.point_dofs] += np.atleast_1d(self.scene["point_force"](t=time))
 
 
 def build(scene) -> Discretisation:
@@ -154,9 +196,7 @@ def build(scene) -> Discretisation:
     if dim == 1:
         u.Set(scene["u0"].cf())
     contact_name = BOUNDARIES[scene.geometry]["contact"]
-    load_form, load_on_t = _load_form(scene, fes, t)
-    d = Discretisation(scene, mesh, fes, t, u, v, viscous, elastic, contact_name,
-                       load_form=load_form, load_depends_on_t=load_on_t)
+    d = Discretisation(scene, mesh, fes, t, u, v, viscous, elastic, contact_name)
 
     ngmesh = mesh.ngmesh  # keep the wrapper alive: Coordinates() is a view into it
     coords = np.array(ngmesh.Coordinates())[:, :dim]
@@ -170,10 +210,7 @@ def build(scene) -> Discretisation:
     xs = [np.array([p[i] for p in scene["probes"]]) for i in range(dim)]
     d.probe_points = mesh(*xs)
 
-    if dim > 1 and not scene["point_force"].is_zero():
-        (at,) = scene["point_force_at"][:1]
-        nearest = int(np.argmin(np.sum((coords - np.asarray(at)) ** 2, axis=1)))
-        d.point_dofs = d.vertex_dofs[nearest]
+    d.loads = Loads(scene, fes, t, d.vertex_dofs, coords)
 
     terms = scene.terms
     if "adhesion" in terms:

@@ -184,6 +184,9 @@ PARAMETERS: dict[str, Param] = {p.name: p for p in [
     _p("k", 0.01, "s", "time step (uniform grid; the last step is not longer than k)", **_POS),
     _p("scheme", "explicit", "", "time scheme: the paper's (viscous term implicit, contact terms lagged)",
        "choice", choices=("explicit",)),
+    _p("solver", "auto", "", "linear solver for the constant matrix: banded Cholesky (RCM order), NGSolve's "
+       "sparsecholesky or umfpack; auto = banded when the bandwidth is small", "choice",
+       choices=("auto", "banded", "sparsecholesky", "umfpack")),
     # material
     _p("E", 1000.0, "Pa", "Young's modulus (elasticity G)", **_POS),
     _p("nu", 0.3, "1", "Poisson's ratio (elasticity G)", lower=-1.0, upper=0.5, lower_open=True, upper_open=True),

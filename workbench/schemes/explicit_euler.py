@@ -7,7 +7,7 @@ Per step n (k_n = t_n - t_{n-1}):
     beta_n = clip(beta_{n-1} - k_n P_B (gamma_nu beta_{n-1} R(u_{n-1,nu})^2 - eps_a)_+, 0, 1)
     sigma_n = P_Q [A eps(v_n) + G eps(u_{n-1})]
 
-The viscous matrix is factored once (sparse Cholesky); the elastic term is a
+The viscous matrix is factored once (:mod:`workbench.solvers`); the elastic term is a
 matvec with the matrix assembled once; only the contact-boundary forms are
 assembled per step. Contact is lagged, so the scheme is only conditionally
 stable (k small against the viscous stiffness of the contact springs).
@@ -16,6 +16,7 @@ from __future__ import annotations
 
 import numpy as np
 
+from .. import solvers
 from ..physics import kelvin_voigt
 
 
@@ -24,8 +25,9 @@ class ExplicitEuler:
 
     def __init__(self, disc):
         self.d = d = disc
-        self.inv = d.viscous.mat.Inverse(d.fes.FreeDofs(), inverse="sparsecholesky")
+        self.solver = solvers.factor(d.viscous.mat, d.fes.FreeDofs(), d.u.vec, d.scene["solver"])
         self.rhs = d.u.vec.CreateVector()
+        self.rhs_np, self.v_np = self.rhs.FV().NumPy(), d.v.vec.FV().NumPy()
         self.moves_clamp = d.dim == 1 and d.scene["delta"].depends_on("t")
         if self.moves_clamp:
             self.v_clamp = d.u.vec.CreateVector()
@@ -47,10 +49,10 @@ class ExplicitEuler:
             vc = self.v_clamp.FV().NumPy()
             vc[d.dirichlet_dofs] = (d.dirichlet_value(t_next) - d.dirichlet_value(t_prev)) / k
             rhs.data -= d.viscous.mat * self.v_clamp
-            d.v.vec.data = self.inv * rhs
+            self.solver.solve(self.rhs_np, self.v_np)
             d.v.vec.data += self.v_clamp
         else:
-            d.v.vec.data = self.inv * rhs
+            self.solver.solve(self.rhs_np, self.v_np)
         d.u.vec.data += k * d.v.vec
         if d.rate_form is not None:
             b = d.beta.vec.FV().NumPy()

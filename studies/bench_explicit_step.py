@@ -1,0 +1,81 @@
+"""Cost of one explicit step against its floor (one back-substitution), on the slab.
+
+Run:  python studies/bench_explicit_step.py [--sizes 220 440 900] [--steps 40]
+
+For each mesh (nx x nx/10 cells, P1) it times, in one process and interleaved,
+(a) a back-substitution with the factored viscous matrix (the floor) and
+(b) a whole step of the paper's scheme (load, elastic matvec, contact and
+bonding forms, solve, update), and reports medians and their ratio. It also
+times 1000 steps at nx = 80, 160, 320 for comparison with other codes.
+"""
+from __future__ import annotations
+
+import argparse
+import json
+import statistics
+import time
+
+import numpy as np
+
+import workbench
+from workbench import discretisation, schemes
+
+
+def scene(nx, solver):
+    return workbench.scene("tp5", nx=nx, ny=max(1, nx // 10), k=1e-4, solver=solver)
+
+
+def per_step(nx, steps, solver="auto"):
+    sc = scene(nx, solver)
+    t0 = time.perf_counter()
+    d = discretisation.build(sc)
+    setup = time.perf_counter() - t0
+    t0 = time.perf_counter()
+    sch = schemes.ExplicitEuler(d)
+    factor = time.perf_counter() - t0
+    rhs = np.random.default_rng(0).standard_normal(d.ndof)
+    out = np.zeros(d.ndof)
+    solve, step = [], []
+    t = 0.0
+    for _ in range(steps):
+        a = time.perf_counter()
+        sch.solver.solve(rhs, out)
+        solve.append(time.perf_counter() - a)
+        a = time.perf_counter()
+        sch.step(t, t + 1e-4)
+        step.append(time.perf_counter() - a)
+        t += 1e-4
+    s, f = statistics.median(step), statistics.median(solve)
+    return dict(nx=nx, ndof=d.ndof, solver=sch.solver.name, setup_s=setup, factor_s=factor, step_ms=1e3 * s,
+                solve_ms=1e3 * f, ratio=s / f)
+
+
+def thousand_steps(nx):
+    ds = workbench.run("tp5", nx=nx, ny=nx // 10, k=1e-3, T=1.0, progress=False, record_times=[0, 1.0])
+    return dict(nx=nx, ndof=ds.attrs["ndof"], steps=ds.attrs["nsteps"], wall_s=ds.attrs["wall_time"],
+                setup_s=ds.attrs["setup_time"])
+
+
+def main():
+    ap = argparse.ArgumentParser()
+    ap.add_argument("--sizes", type=int, nargs="*", default=[220, 440, 900])
+    ap.add_argument("--steps", type=int, default=40)
+    ap.add_argument("--solvers", nargs="*", default=["banded", "sparsecholesky"])
+    ap.add_argument("--thousand", type=int, nargs="*", default=[80, 160, 320])
+    args = ap.parse_args()
+    rows = []
+    for nx in args.sizes:
+      for solver in args.solvers:
+        r = per_step(nx, args.steps, solver)
+        rows.append(r)
+        print(f"nx={r['nx']:4d} ndof={r['ndof']:7d} {r['solver']:>14}  step {r['step_ms']:8.2f} ms  floor (solve) {r['solve_ms']:8.2f} ms"
+              f"  ratio {r['ratio']:.2f}  (factor {r['factor_s']:.2f} s, setup {r['setup_s']:.2f} s)", flush=True)
+    for nx in args.thousand:
+        r = thousand_steps(nx)
+        rows.append(r)
+        print(f"1000 steps, nx={nx:4d} ndof={r['ndof']:6d}: {r['wall_s']:.2f} s (+ setup {r['setup_s']:.2f} s)", flush=True)
+    print(json.dumps(rows))
+
+
+if __name__ == "__main__":
+    main()

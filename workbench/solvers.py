@@ -1,0 +1,94 @@
+"""Factor a constant symmetric positive definite matrix once; solve many times.
+
+``banded``: reverse Cuthill–McKee ordering of the free dofs, then LAPACK's
+banded Cholesky (``dpbtrf``/``dpbtrs`` via SciPy). On thin domains (the paper's
+slab) the bandwidth is ~2 (ny + 1) and a back-substitution is 2–4x faster than
+NGSolve's ``sparsecholesky`` (measured in ``studies/bench_explicit_step.py``).
+``sparsecholesky`` / ``umfpack``: NGSolve's own direct solvers.
+``auto`` takes ``banded`` when the ordered bandwidth is small against the size.
+
+All solvers work on NumPy views of NGSolve vectors: ``solve(rhs, out)`` writes
+the solution on the free dofs and zero on the Dirichlet dofs.
+
+Examples
+--------
+>>> import numpy as np, scipy.sparse as sp
+>>> K = sp.diags([-1.0, 2.0, -1.0], [-1, 0, 1], shape=(5, 5)).tocsr()
+>>> s = BandedCholesky(K, np.arange(1, 5))
+>>> out = np.zeros(5); s.solve(np.ones(5), out); out.round(3).tolist()
+[0.0, 2.0, 3.0, 3.0, 2.0]
+"""
+from __future__ import annotations
+
+import numpy as np
+import scipy.sparse as sp
+from scipy.linalg import cho_solve_banded, cholesky_banded
+from scipy.sparse.csgraph import reverse_cuthill_mckee
+
+SOLVERS = ("auto", "banded", "sparsecholesky", "umfpack")
+
+
+def to_scipy(mat) -> sp.csr_matrix:
+    """An NGSolve sparse matrix as SciPy CSR (the full matrix, also for symmetric storage)."""
+    rows, cols, vals = mat.COO()
+    rows, cols, vals = np.asarray(rows), np.asarray(cols), np.asarray(vals)
+    n = mat.height
+    A = sp.csr_matrix((vals, (rows, cols)), shape=(n, n))
+    if getattr(mat, "symmetric", False) or not np.any(rows < cols):  # lower triangle stored only
+        A = A + sp.tril(A, -1).T
+    return A.tocsr()
+
+
+class BandedCholesky:
+    """RCM-ordered banded Cholesky of ``K[free][:, free]``."""
+
+    name = "banded"
+
+    def __init__(self, K: sp.spmatrix, free: np.ndarray):
+        Kf = K[free][:, free].tocsr()
+        perm = reverse_cuthill_mckee(Kf, symmetric_mode=True)
+        self.order = free[perm]  # position i of the banded system is dof order[i]
+        Kp = Kf[perm][:, perm].tocoo()
+        upper = Kp.row <= Kp.col
+        self.bandwidth = bw = int(np.max(Kp.col[upper] - Kp.row[upper]))
+        ab = np.zeros((bw + 1, Kf.shape[0]))
+        ab[bw + Kp.row[upper] - Kp.col[upper], Kp.col[upper]] = Kp.data[upper]
+        self.factor = cholesky_banded(ab, lower=False, check_finite=False)
+        self.fixed = np.setdiff1d(np.arange(K.shape[0]), free)
+
+    def solve(self, rhs: np.ndarray, out: np.ndarray) -> None:
+        x = cho_solve_banded((self.factor, False), rhs[self.order], overwrite_b=True, check_finite=False)
+        out[self.fixed] = 0.0
+        out[self.order] = x
+
+
+class NGSolveDirect:
+    """NGSolve's ``Inverse`` on the free dofs (``sparsecholesky`` needs a symmetric matrix)."""
+
+    def __init__(self, mat, freedofs, method: str, fes_vector):
+        self.name = method
+        self.inv = mat.Inverse(freedofs, inverse=method)
+        self.x, self.y = fes_vector.CreateVector(), fes_vector.CreateVector()
+
+    def solve(self, rhs: np.ndarray, out: np.ndarray) -> None:
+        self.y.FV().NumPy()[:] = rhs
+        self.x.data = self.inv * self.y
+        out[:] = self.x.FV().NumPy()
+
+
+def bandwidth_after_rcm(K: sp.spmatrix, free: np.ndarray) -> int:
+    Kf = K[free][:, free].tocsr()
+    perm = reverse_cuthill_mckee(Kf, symmetric_mode=True)
+    Kp = Kf[perm][:, perm].tocoo()
+    return int(np.max(np.abs(Kp.row - Kp.col))) if Kp.nnz else 0
+
+
+def factor(mat, freedofs, vector, method: str = "auto"):
+    """Factor an NGSolve SPD matrix on ``freedofs`` with ``method`` (see module docs)."""
+    free = np.nonzero(np.array(freedofs, dtype=bool))[0]
+    if method in ("banded", "auto"):
+        K = to_scipy(mat)
+        if method == "banded" or bandwidth_after_rcm(K, free) <= max(64, 0.02 * free.size):
+            return BandedCholesky(K, free)
+        method = "sparsecholesky"
+    return NGSolveDirect(mat, freedofs, method, vector)
