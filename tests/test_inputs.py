@@ -120,18 +120,22 @@ def test_run_attrs_contract():
 
 def test_divergence_stops_and_keeps(tmp_path):
     """An unstable explicit run stops at the first bad step; the steps before are kept and marked."""
-    with pytest.raises(workbench.Diverged) as err:
-        workbench.run("slab", h=0.05, k=0.01, c_nu=1e7, traction_top="(0, -1)", progress=False)
+    with pytest.warns(RuntimeWarning, match="allow_unstable"), pytest.raises(workbench.Diverged) as err:
+        workbench.run("slab", h=0.05, k=0.01, c_nu=1e7, traction_top="(0, -1)", allow_unstable=True, progress=False)
     ds = err.value.dataset
     assert ds.attrs["status"] == "incomplete" and "at step" in ds.attrs["failure"]
     assert f"step {err.value.step} " in str(err.value) and "t = " in str(err.value)
     assert 0 < ds.sizes["time"] <= err.value.step and np.isfinite(ds.u_probe.values).all()
     out = tmp_path / "bad.nc"
     proc = subprocess.run([sys.executable, "-m", "workbench.cli", "run", "slab", "--h", "0.05", "--k", "0.01",
-                           "--set", "c_nu=1e7", "--set", "traction_top=(0, -1)", "-o", str(out), "--no-progress"],
+                           "--set", "c_nu=1e7", "--set", "traction_top=(0, -1)", "--set", "allow_unstable=true",
+                           "-o", str(out), "--no-progress"],
                           capture_output=True, text=True)
     assert proc.returncode == 3 and "error:" in proc.stderr
     assert workbench.load(out).attrs["status"] == "incomplete"
+    proc = subprocess.run([sys.executable, "-m", "workbench.cli", "run", "slab", "--h", "0.05", "--k", "0.01",
+                           "--set", "c_nu=1e7", "-o", str(tmp_path / "refused.nc")], capture_output=True, text=True)
+    assert proc.returncode == 2 and "k_crit" in proc.stderr and not (tmp_path / "refused.nc").exists()
 
 
 def test_cli(tmp_path):

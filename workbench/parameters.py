@@ -182,8 +182,10 @@ PARAMETERS: dict[str, Param] = {p.name: p for p in [
     # time
     _p("T", 1.0, "s", "final time", **_POS),
     _p("k", 0.01, "s", "time step (uniform grid; the last step is not longer than k)", **_POS),
-    _p("scheme", "explicit", "", "time scheme: the paper's (viscous term implicit, contact terms lagged)",
-       "choice", choices=("explicit",)),
+    _p("scheme", "explicit", "", "time scheme: 'explicit' = the paper's (contact lagged, conditionally stable), "
+       "'implicit' = backward Euler with implicit contact (stable)", "choice", choices=("explicit", "implicit")),
+    _p("allow_unstable", False, "", "run the explicit scheme even when k exceeds its predicted stability limit",
+       "flag"),
     _p("solver", "auto", "", "linear solver for the constant matrix: banded Cholesky (RCM order), NGSolve's "
        "sparsecholesky or umfpack; auto = banded when the bandwidth is small", "choice",
        choices=("auto", "banded", "sparsecholesky", "umfpack")),

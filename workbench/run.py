@@ -13,7 +13,9 @@ import math
 
 import numpy as np
 
-from . import discretisation, meshes, results, scenes
+import warnings
+
+from . import discretisation, meshes, results, scenes, stability
 from .schemes import SCHEMES, Diverged, march, time_grid
 
 #: Above this many steps only about MAX_RECORDS steps are recorded (evenly), unless asked otherwise.
@@ -49,8 +51,8 @@ def run(scene, *, progress=None, record_times=None, times=None, limit=None, **ov
     times : sequence of float, optional
         A non-uniform time grid (overrides ``k``).
     limit : float, optional
-        Displacement RMS beyond which the run is stopped as diverged
-        (default: 100 x the body's largest extent).
+        Displacement (max over dofs) beyond which the run is stopped as diverged
+        (default: 10 x the body's largest extent).
     **overrides
         Scene parameters (``k=0.005``, ``gamma_nu=1``, ...).
 
@@ -75,10 +77,21 @@ def run(scene, *, progress=None, record_times=None, times=None, limit=None, **ov
 
     with results.Clock() as setup:
         disc = discretisation.build(sc)
+        checks = {}
+        if sc["scheme"] == "explicit":
+            est = stability.critical_step(sc, disc)
+            k_max = float(np.max(np.diff(grid)))
+            checks = {"k_crit": est.k_crit, "stability_override": 0}
+            if k_max > est.k_crit:
+                if not sc["allow_unstable"]:
+                    stability.check(sc, k_max, est)
+                warnings.warn(f"k = {k_max:.3g} s > predicted k_crit = {est.k_crit:.3g} s: running the explicit "
+                              "scheme anyway (allow_unstable)", RuntimeWarning, stacklevel=2)
+                checks["stability_override"] = 1
         scheme = SCHEMES[sc["scheme"]](disc)
     recorder = results.Recorder(disc, grid, record, snaps)
     if limit is None:
-        limit = 100.0 * max(getattr(sc, "values").get(k, 0.0) for k in ("length", "width", "depth", "height"))
+        limit = 10.0 * max(sc.values.get(k, 0.0) for k in ("length", "width", "depth", "height"))
     failure = None
     with results.Clock() as clock:
         try:
@@ -91,7 +104,7 @@ def run(scene, *, progress=None, record_times=None, times=None, limit=None, **ov
         "setup_time": setup.wall, "wall_time": clock.wall, "cpu_time": clock.cpu,
         "status": "complete" if failure is None else "incomplete",
         "failure": "" if failure is None else str(failure),
-    }
+    } | checks
     ds = recorder.dataset(results.provenance(sc, extra))
     if failure is not None:
         failure.dataset = ds

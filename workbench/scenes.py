@@ -31,7 +31,7 @@ except ModuleNotFoundError:  # pragma: no cover
 
 _CONTACT = ("contact", "adhesion", "c_nu", "m_nu", "gap", "gamma_nu", "eps_a", "L", "beta0",
             "bonding_truncation")
-_TIME = ("T", "k", "scheme", "order", "h", "solver")
+_TIME = ("T", "k", "scheme", "order", "h", "solver", "allow_unstable")
 _OUTPUT = ("probes", "snapshots")
 _KV2D = ("E", "nu", "a1", "a2")
 

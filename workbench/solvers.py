@@ -62,6 +62,13 @@ class BandedCholesky:
         out[self.order] = x
 
 
+    def solve_many(self, R: np.ndarray) -> np.ndarray:
+        """Solutions for the columns of R (n x m), zero on the Dirichlet dofs."""
+        X = np.zeros_like(R)
+        X[self.order] = cho_solve_banded((self.factor, False), R[self.order], check_finite=False)
+        return X
+
+
 class NGSolveDirect:
     """NGSolve's ``Inverse`` on the free dofs (``sparsecholesky`` needs a symmetric matrix)."""
 
