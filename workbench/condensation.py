@@ -136,3 +136,4 @@ class CondensedSystem:
         S0 = 0.5 * (S0 + S0.T)
         self.S0_inv = la.cho_solve(la.cho_factor(S0), np.eye(m)) if m else S0
         self.S0_inv = 0.5 * (self.S0_inv + self.S0_inv.T)
+        self.S0_abs = np.abs(self.S0_inv)
