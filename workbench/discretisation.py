@@ -222,10 +222,13 @@ def build(scene) -> Discretisation:
     return d
 
 
-def _add_bonding(d: Discretisation) -> None:
-    """The beta field (P0 on contact facets; a point value at the 1D rod end) and its rate form."""
-    scene, mesh, name = d.scene, d.mesh, d.contact_name
-    if d.dim == 1:
+def bonding_space(mesh, dim: int, name: str):
+    """The space of beta: P0 on the contact facets (a point value at the 1D rod end).
+
+    Returns (space, beta_dofs, facet measures, facet midpoints): the dofs that
+    live on the contact side, in the order the results store them.
+    """
+    if dim == 1:
         space = ngs.H1(mesh, order=1, definedon=mesh.Boundaries(name))
     else:
         space = ngs.SurfaceL2(mesh, order=0, definedon=mesh.Boundaries(name))
@@ -234,15 +237,21 @@ def _add_bonding(d: Discretisation) -> None:
     measure += q * ngs.ds(name)
     measure.Assemble()
     m = measure.vec.FV().NumPy().copy()
-    d.beta_dofs = np.nonzero(m > 0)[0]
-    d.facet_measure = m[d.beta_dofs]
+    dofs = np.nonzero(m > 0)[0]
     xyz = []
-    for c in (ngs.x, ngs.y, ngs.z)[: d.dim]:
+    for c in (ngs.x, ngs.y, ngs.z)[:dim]:
         lf = ngs.LinearForm(space)
         lf += c * q * ngs.ds(name)
         lf.Assemble()
-        xyz.append(lf.vec.FV().NumPy()[d.beta_dofs] / d.facet_measure)
-    d.facet_xyz = np.stack(xyz, axis=1)
+        xyz.append(lf.vec.FV().NumPy()[dofs] / m[dofs])
+    return space, dofs, m[dofs], np.stack(xyz, axis=1)
+
+
+def _add_bonding(d: Discretisation) -> None:
+    """The beta field and its rate form (bonding law, P_B = facet mean)."""
+    scene, name = d.scene, d.contact_name
+    space, d.beta_dofs, d.facet_measure, d.facet_xyz = bonding_space(d.mesh, d.dim, name)
+    q = space.TestFunction()
     d.beta = ngs.GridFunction(space, "beta")
     d.beta.vec.FV().NumPy()[d.beta_dofs] = scene["beta0"]
     v = scene.values

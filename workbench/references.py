@@ -13,10 +13,38 @@ Examples
 >>> ref = tp1_exact()
 >>> round(float(ref(1.0, x=1.0)[0]), 6), round(float(ref(1.0)[1]), 6)
 (-0.544863, 0.973361)
+>>> round(float(ref.stress(1.0)), 6)  # sigma(1) = gamma L beta(1)^2 (the adhesive pull balances it)
+0.085269
 """
 from __future__ import annotations
 
 import numpy as np
+
+
+class RodSolution:
+    """A rod reference u(x, t) = delta(t) + A(t) x with beta(t).
+
+    ``solution(t, x)`` returns (u, beta); ``strain(t)`` is A(t) = u_x;
+    ``stress(t)`` is sigma = a A + b A'.
+    """
+
+    def __init__(self, delta, strain, strain_rate, beta, a=1.0, b=1.0):
+        self._delta, self._A, self._dA, self._beta, self.a, self.b = delta, strain, strain_rate, beta, a, b
+
+    def __call__(self, t, x=1.0):
+        t = np.asarray(t, dtype=float)
+        A = self._A(t)
+        x = np.asarray(x, dtype=float)
+        if A.ndim and x.ndim:  # (time, point)
+            return self._delta(t)[:, None] + A[:, None] * x[None, :], self._beta(t)
+        return self._delta(t) + A * x, self._beta(t)
+
+    def strain(self, t):
+        return self._A(np.asarray(t, dtype=float))
+
+    def stress(self, t):
+        t = np.asarray(t, dtype=float)
+        return self.a * self._A(t) + self.b * self._dA(t)
 
 
 def tp1_exact():
@@ -28,13 +56,11 @@ def tp1_exact():
     """
     gamma, L = 0.3, 0.3
     c = gamma * L / (1.0 - 2.0 * gamma * L * L)
-
-    def solution(t, x=1.0):
-        t = np.asarray(t, dtype=float)
-        amp = c * (np.exp(-2 * gamma * L * L * t) - np.exp(-t))
-        return amp * np.asarray(x) - 0.6, np.exp(-gamma * L * L * t)
-
-    return solution
+    r = 2 * gamma * L * L
+    return RodSolution(delta=lambda t: np.full_like(t, -0.6),
+                       strain=lambda t: c * (np.exp(-r * t) - np.exp(-t)),
+                       strain_rate=lambda t: c * (-r * np.exp(-r * t) + np.exp(-t)),
+                       beta=lambda t: np.exp(-gamma * L * L * t))
 
 
 def rod_ode(scene, rtol=1e-11, atol=1e-13):
@@ -47,8 +73,9 @@ def rod_ode(scene, rtol=1e-11, atol=1e-13):
 
     Returns
     -------
-    callable
-        ``solution(t, x=length) -> (u(x, t), beta(t))`` (dense output, vectorised in t).
+    RodSolution
+        ``solution(t, x=length) -> (u(x, t), beta(t))`` (dense output, vectorised in t),
+        with ``strain(t)`` and ``stress(t)``.
     """
     from scipy.integrate import solve_ivp
 
@@ -84,11 +111,13 @@ def rod_ode(scene, rtol=1e-11, atol=1e-13):
     if not sol.success:
         raise RuntimeError(f"reference ODE failed: {sol.message}")
 
-    def solution(t, x=ell):
-        A, beta = sol.sol(np.asarray(t, dtype=float))
-        return delta(t=np.asarray(t, dtype=float)) + A * np.asarray(x), beta
+    def strain_rate(t):
+        y = sol.sol(t)
+        return np.array([rhs(ti, yi)[0] for ti, yi in zip(np.atleast_1d(t), np.atleast_2d(y.T))]).reshape(np.shape(t))
 
-    return solution
+    return RodSolution(delta=lambda t: np.broadcast_to(np.asarray(delta(t=t), dtype=float), np.shape(t)).copy(),
+                       strain=lambda t: sol.sol(t)[0], strain_rate=strain_rate, beta=lambda t: sol.sol(t)[1],
+                       a=a, b=b)
 
 
 def modal_linear(K_A: np.ndarray, K_G: np.ndarray, F1: np.ndarray, free: np.ndarray):

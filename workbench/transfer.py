@@ -1,0 +1,181 @@
+"""Compare fields of two runs on the finer mesh: prolongation and the paper's error norm.
+
+A coarse run's fields are carried onto the fine run's mesh:
+
+* displacement (P1): the fine vertices are located in the coarse cells and the
+  coarse field is evaluated there with barycentric weights (a sparse
+  prolongation matrix built once per mesh pair). On nested meshes this is the
+  exact prolongation (the coarse P1 field *is* a fine P1 field); on non-nested
+  meshes it is nodal interpolation. Higher orders use NGSolve's ``Set``
+  (element-wise L2 projection, exact on nested meshes);
+* stress (P0 cells) and bonding field (P0 facets): the fine cell centroid /
+  facet midpoint is located in the coarse mesh and takes that cell's value
+  (exact on nested meshes).
+
+Norms (SPEC, Corollary 6.7): |u|_V = ||eps(u)||_L2(Omega), |sigma|_Q = ||sigma||_L2
+(Frobenius), |beta|_L2(Gamma_3), evaluated on the fine mesh.
+"""
+from __future__ import annotations
+
+import ngsolve as ngs
+import numpy as np
+import scipy.sparse as sp
+
+from . import meshes
+from .discretisation import bonding_space
+from .physics import kelvin_voigt
+from .scenes import BOUNDARIES
+
+
+def _scene_key(scene):
+    cells = meshes.cells(scene)
+    v = scene.values
+    return (scene.geometry, cells, v.get("length"), v.get("width"), v.get("depth"), v.get("height"), v["order"])
+
+
+class MeshInfo:
+    """A run's mesh with the arrays the transfer needs (rebuilt from the scene: meshes are deterministic)."""
+
+    def __init__(self, scene):
+        self.scene = scene
+        self.dim = scene.dim
+        self.order = scene["order"]
+        self.mesh = meshes.build(scene)
+        ngm = self.mesh.ngmesh
+        self.xyz = np.array(ngm.Coordinates())[:, : self.dim]
+        elems = {1: ngm.Elements1D, 2: ngm.Elements2D, 3: ngm.Elements3D}[self.dim]().NumPy()
+        self.cells = np.array(elems["nodes"][:, : self.dim + 1], dtype=np.int64) - 1
+        self.centroids = self.xyz[self.cells].mean(axis=1)
+        self.contact = BOUNDARIES[scene.geometry]["contact"]
+        self.fes = (ngs.H1 if self.dim == 1 else ngs.VectorH1)(self.mesh, order=self.order)
+        self.p0 = ngs.L2(self.mesh, order=0)
+        self.bspace, self.beta_dofs, self.facet_measure, self.facet_xyz = bonding_space(self.mesh, self.dim, self.contact)
+        self._strain_matrix = None
+
+    def locate(self, points: np.ndarray, vb=ngs.VOL):
+        """Cell numbers and barycentric coordinates of ``points`` (n x dim) in this mesh."""
+        pts = [points[:, i] for i in range(self.dim)]
+        mp = self.mesh(*pts, VOL_or_BND=vb) if vb == ngs.BND else self.mesh(*pts)
+        nr = np.asarray(mp["nr"], dtype=np.int64)
+        if np.any(nr < 0):
+            raise ValueError("transfer: some points of the fine mesh are outside the coarse mesh")
+        return nr
+
+    def barycentric(self, points: np.ndarray, cells: np.ndarray) -> np.ndarray:
+        verts = self.xyz[self.cells[cells]]  # (n, d+1, d)
+        T = np.transpose(verts[:, 1:, :] - verts[:, :1, :], (0, 2, 1))  # (n, d, d)
+        lam = np.linalg.solve(T, (points - verts[:, 0, :])[..., None])[..., 0]
+        return np.concatenate([1.0 - lam.sum(axis=1, keepdims=True), lam], axis=1)
+
+    def strain_matrix(self):
+        """K_eps with u^T K_eps u = ||eps(u)||^2 (assembled once)."""
+        if self._strain_matrix is None:
+            u, w = self.fes.TnT()
+            form = ngs.BilinearForm(self.fes, symmetric=False)
+            form += kelvin_voigt.energy_product(lambda e: e, u, w, self.dim) * ngs.dx
+            form.Assemble()
+            rows, cols, vals = form.mat.COO()
+            self._strain_matrix = sp.csr_matrix((np.asarray(vals), (np.asarray(rows), np.asarray(cols))),
+                                                shape=(self.fes.ndof,) * 2)
+        return self._strain_matrix
+
+    def cell_volumes(self) -> np.ndarray:
+        verts = self.xyz[self.cells]
+        T = verts[:, 1:, :] - verts[:, :1, :]
+        fact = {1: 1.0, 2: 0.5, 3: 1.0 / 6.0}[self.dim]
+        return np.abs(np.linalg.det(T)) * fact if self.dim > 1 else np.abs(T[:, 0, 0])
+
+
+_CACHE: dict = {}
+
+
+def mesh_info(scene) -> MeshInfo:
+    """The (cached) MeshInfo of a scene's mesh."""
+    key = _scene_key(scene)
+    if key not in _CACHE:
+        if len(_CACHE) >= 16:
+            _CACHE.pop(next(iter(_CACHE)))
+        _CACHE[key] = MeshInfo(scene)
+    return _CACHE[key]
+
+
+def nested(coarse: MeshInfo, fine: MeshInfo) -> bool:
+    """True when every coarse cell count divides the fine one (structured meshes are then nested)."""
+    c, f = meshes.cells(coarse.scene), meshes.cells(fine.scene)
+    return all(fi % ci == 0 for ci, fi in zip(c, f))
+
+
+class Transfer:
+    """Carries coarse-run fields onto the fine run's mesh (see the module docs)."""
+
+    def __init__(self, coarse: MeshInfo, fine: MeshInfo):
+        self.coarse, self.fine = coarse, fine
+        self.exact = nested(coarse, fine)
+        self.method = "nested prolongation (exact)" if self.exact else "interpolation (meshes not nested)"
+        same = coarse is fine
+        self.identity = same
+        if same:
+            return
+        if coarse.order == 1 and fine.order == 1:
+            cells = coarse.locate(fine.xyz)
+            lam = coarse.barycentric(fine.xyz, cells)
+            nf, nc = len(fine.xyz), len(coarse.xyz)
+            rows = np.repeat(np.arange(nf), coarse.dim + 1)
+            self.P = sp.csr_matrix((lam.ravel(), (rows, coarse.cells[cells].ravel())), shape=(nf, nc))
+        self.cell_map = coarse.locate(fine.centroids)
+        if coarse.dim == 1:
+            self.facet_map = np.zeros(len(fine.facet_xyz), dtype=np.int64)
+        else:
+            bnd_el = coarse.locate(fine.facet_xyz, vb=ngs.BND)
+            position = np.full(coarse.bspace.ndof, -1)
+            position[coarse.beta_dofs] = np.arange(len(coarse.beta_dofs))
+            elements, inverse = np.unique(bnd_el, return_inverse=True)
+            dofs = np.array([coarse.bspace.GetDofNrs(ngs.ElementId(ngs.BND, int(e)))[0] for e in elements])
+            self.facet_map = position[dofs][inverse]
+            if np.any(self.facet_map < 0):
+                raise ValueError("transfer: a contact facet of the fine mesh is not on the coarse contact side")
+
+    def displacement(self, u_dofs: np.ndarray, u_nodes: np.ndarray) -> np.ndarray:
+        """The coarse displacement as a fine dof vector."""
+        if self.identity:
+            return u_dofs
+        c, f = self.coarse, self.fine
+        if hasattr(self, "P"):
+            vals = self.P @ u_nodes  # (fine vertex, component)
+            out = np.zeros(f.fes.ndof)
+            per = f.fes.ndof // f.dim
+            for comp in range(f.dim):
+                out[comp * per + np.arange(len(f.xyz))] = vals[:, comp] if vals.ndim > 1 else vals
+            return out
+        gc, gf = ngs.GridFunction(c.fes), ngs.GridFunction(f.fes)
+        gc.vec.FV().NumPy()[:] = u_dofs
+        gf.Set(gc)
+        return gf.vec.FV().NumPy().copy()
+
+    def cells(self, values: np.ndarray) -> np.ndarray:
+        return values if self.identity else values[self.cell_map]
+
+    def facets(self, values: np.ndarray) -> np.ndarray:
+        return values if self.identity else values[..., self.facet_map]
+
+
+STRESS_WEIGHTS = {1: np.array([1.0]), 2: np.array([1.0, 1.0, 2.0]), 3: np.array([1.0, 1.0, 1.0, 2.0, 2.0, 2.0])}
+
+
+def norms(fine: MeshInfo, du: np.ndarray | None, dsigma: np.ndarray | None, dbeta: np.ndarray | None):
+    """(|du|_V, |dsigma|_Q, |dbeta|_L2(Gamma3)) of differences given on the fine mesh."""
+    out = []
+    if du is not None:
+        out.append(float(np.sqrt(max(du @ (fine.strain_matrix() @ du), 0.0))))
+    else:
+        out.append(np.nan)
+    if dsigma is not None:
+        w = STRESS_WEIGHTS[fine.dim]
+        out.append(float(np.sqrt(np.sum(fine.cell_volumes()[:, None] * w[None, :] * dsigma ** 2))))
+    else:
+        out.append(np.nan)
+    if dbeta is not None:
+        out.append(float(np.sqrt(np.sum(fine.facet_measure * dbeta ** 2))))
+    else:
+        out.append(np.nan)
+    return tuple(out)
