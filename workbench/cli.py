@@ -2,6 +2,7 @@
 
 Examples (shell)::
 
+    workbench study tp1 --k 0.04 0.02 0.01 --reference ode -o out/tp1-k.nc --plot out/tp1-k.png
     workbench scenes
     workbench show tp5
     workbench run tp1 --k 0.005 -o out/tp1.nc --plot out/tp1.png
@@ -11,6 +12,8 @@ from __future__ import annotations
 
 import argparse
 import sys
+
+import numpy as np
 
 from .parameters import ParameterError
 
@@ -103,6 +106,52 @@ def _summary(ds) -> str:
     return "\n".join(lines)
 
 
+def _reference(text):
+    if text in (None, "finest", "ode", "exact"):
+        return text or "finest"
+    out = {}
+    for part in text.split(","):
+        if "=" not in part:
+            raise ParameterError(f"--reference {text!r}: give finest, ode, exact or e.g. h=0.003,k=0.0005")
+        key, value = part.split("=", 1)
+        out[key.strip()] = value.strip() if key.strip() == "scheme" else float(value)
+    return out
+
+
+def cmd_study(args) -> int:
+    from pathlib import Path
+
+    from . import plotting, results
+    from .study import Study
+
+    overrides = {k: v for k, v in _overrides(args).items() if k not in ("h", "k", "order", "scheme")}
+    st = Study(args.scene, h=args.h, k=args.k, k_over_h=args.k_over_h, order=args.order, scheme=args.scheme,
+               reference=_reference(args.reference), n_compare=args.compare, workers=args.workers,
+               client=args.scheduler, **overrides)
+    archive = Path(args.output + ".cases") if args.output else None
+    ds = st.run(archive, progress=False if args.no_progress else None)
+    if args.output:
+        results.write(ds, args.output)
+        print(f"wrote {args.output} (cases in {archive}/)")
+    for norm in ("error", "error_V", "error_Q", "error_beta", "error_beta_end"):
+        rates = ds.observed_order.sel(norm=norm)
+        found = {a: np.round(rates.sel(along=a).values.ravel(), 3).tolist() for a in rates.along.values
+                 if np.isfinite(rates.sel(along=a).values).any()}
+        if found:
+            print(f"observed order of {norm}: {found}")
+    o = st.overhead
+    if o["new_cases"]:
+        print(f"study: {o['execute']:.1f} s running {o['new_cases']} new case(s) (their own setup + time loops, "
+              f"summed over workers: {o['cases']:.1f} s), {o['evaluate']:.1f} s comparing fields")
+    if args.plot:
+        plotting.convergence(ds, args.plot)
+        print(f"wrote {args.plot}")
+    if args.pareto:
+        plotting.pareto(ds, args.pareto)
+        print(f"wrote {args.pareto}")
+    return 0
+
+
 def build_parser() -> argparse.ArgumentParser:
     parser = argparse.ArgumentParser(prog="workbench", description=__doc__.split("\n")[0])
     sub = parser.add_subparsers(dest="command", required=True)
@@ -117,6 +166,23 @@ def build_parser() -> argparse.ArgumentParser:
     p.add_argument("--plot", help="PNG overview plot to write")
     p.add_argument("--no-progress", action="store_true", help="no progress bar")
     p.set_defaults(func=cmd_run)
+    p = sub.add_parser("study", help="refinement sweep over h, k, order, scheme: errors, observed orders, cost")
+    p.add_argument("scene", help="built-in scene name or .toml file")
+    p.add_argument("--set", action="append", metavar="NAME=VALUE", help="override a parameter (repeatable)")
+    p.add_argument("--h", type=float, nargs="+", help="element sizes")
+    p.add_argument("--k", type=float, nargs="+", help="time steps (all combinations with --h)")
+    p.add_argument("--k-over-h", type=float, help="couple k = C h instead of --k")
+    p.add_argument("--order", type=int, nargs="+", help="element orders")
+    p.add_argument("--scheme", nargs="+", help="schemes (explicit, implicit)")
+    p.add_argument("--reference", help="finest (default) | ode | exact | h=..,k=..[,order=..,scheme=..]")
+    p.add_argument("--compare", type=int, default=10, help="number of common times at which fields are compared")
+    p.add_argument("--workers", type=int, default=2, help="local worker processes (0: in this process)")
+    p.add_argument("--scheduler", help="dask.distributed scheduler address (run the cases there)")
+    p.add_argument("-o", "--output", help="netCDF archive of the study (cases archived in OUTPUT.cases/)")
+    p.add_argument("--plot", help="PNG convergence plot")
+    p.add_argument("--pareto", help="PNG error-vs-cost plot")
+    p.add_argument("--no-progress", action="store_true")
+    p.set_defaults(func=cmd_study)
     return parser
 
 

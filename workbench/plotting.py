@@ -57,3 +57,55 @@ def overview(ds, path=None):
     fig.suptitle(f"{ds.attrs.get('scene')}: scheme {ds.attrs.get('scheme')}, h = {ds.attrs.get('h_max'):.3g}, "
                  f"k = {ds.attrs.get('k_actual'):.3g}{status}", fontsize=9)
     return _save(fig, path)
+
+
+def convergence(study_ds, path=None, norms=("error", "error_V", "error_Q", "error_beta")):
+    """Log-log error against h + k (coupled sweeps), h or k, with fitted orders and a slope-1 guide."""
+    coupled = "level" in study_ds.dims
+    if coupled:
+        along, x = "h+k", study_ds.h.values + study_ds.k.values
+    elif study_ds.sizes.get("h", 1) > 1:
+        along, x = "h", study_ds.h.values
+    else:
+        along, x = "k", study_ds.k.values
+    norms = [n for n in norms if n in study_ds and np.isfinite(study_ds[n].values).any()]
+    fig, axes = plt.subplots(1, len(norms), figsize=(3.6 * len(norms), 3.4), constrained_layout=True, squeeze=False)
+    for ax, norm in zip(axes[0], norms):
+        for order in study_ds.order.values:
+            for scheme in study_ds.scheme.values:
+                err = study_ds[norm].sel(order=order, scheme=scheme)
+                if not coupled:
+                    err = err.isel(k=-1) if along == "h" else err.isel(h=-1)
+                y = np.ravel(err.values)
+                good = np.isfinite(y) & (y > 0)
+                if not good.any():
+                    continue
+                rate = float(study_ds.observed_order.sel(norm=norm, along=along, order=order, scheme=scheme))
+                ax.loglog(x[good], y[good], "o-", label=f"P{order} {scheme}: {rate:.2f}")
+                ref = y[good][0] * (x[good] / x[good][0])
+                ax.loglog(x[good], ref, ":", color="gray")
+        ax.set(xlabel=along, title=norm)
+        ax.legend(fontsize=7, title="fitted order", title_fontsize=7)
+    fig.suptitle(f"{study_ds.attrs.get('scene')}: reference {study_ds.attrs.get('reference')} "
+                 f"(dotted: slope 1)", fontsize=9)
+    return _save(fig, path)
+
+
+def pareto(study_ds, path=None, error="error", cost="wall_time"):
+    """Error against cost (wall time incl. setup) of every case, the Pareto front joined."""
+    err = study_ds[error].values.ravel()
+    c = (study_ds[cost] + (study_ds["setup_time"] if cost == "wall_time" else 0)).values.ravel()
+    front = study_ds["pareto"].values.ravel().astype(bool) if error == "error" else np.zeros_like(err, bool)
+    fig, ax = plt.subplots(figsize=(5, 3.8), constrained_layout=True)
+    stacked = study_ds[error].stack(case=study_ds[error].dims)
+    labels = [", ".join(f"{d}={v}" for d, v in zip(stacked.indexes["case"].names, idx)) for idx in stacked.indexes["case"]]
+    ok = np.isfinite(err) & np.isfinite(c)
+    ax.loglog(c[ok], err[ok], "o", color="tab:blue", alpha=0.6)
+    order = np.argsort(c[front & ok])
+    ax.loglog(c[front & ok][order], err[front & ok][order], "-", color="tab:red", label="Pareto front")
+    for ci, ei, lab, f in zip(c, err, labels, front):
+        if f and np.isfinite(ci) and np.isfinite(ei):
+            ax.annotate(lab, (ci, ei), fontsize=6)
+    ax.set(xlabel=f"{cost} [s]", ylabel=error, title=f"{study_ds.attrs.get('scene')}: accuracy vs cost")
+    ax.legend(fontsize=7)
+    return _save(fig, path)

@@ -27,7 +27,6 @@ from __future__ import annotations
 
 import json
 import multiprocessing
-import sys
 import tempfile
 import time
 from concurrent.futures import ProcessPoolExecutor, as_completed
@@ -58,20 +57,41 @@ class Case:
         return {"h": self.h, "k": self.k, "order": self.order, "scheme": self.scheme}
 
 
-def _run_case(scene, case_values, record_times, snapshots):
-    """Worker: run one case, return its Dataset with the process's peak memory (separate process)."""
+def _peak_memory_reset() -> bool:
+    """Reset the process's peak resident memory (Linux: write 5 to /proc/self/clear_refs)."""
+    try:
+        with open("/proc/self/clear_refs", "w") as f:
+            f.write("5")
+        return True
+    except OSError:
+        return False
+
+
+def _peak_memory_mb() -> float:
+    try:
+        with open("/proc/self/status") as f:
+            for line in f:
+                if line.startswith("VmHWM:"):
+                    return float(line.split()[1]) / 1024.0
+    except OSError:
+        pass
     import resource
 
+    return resource.getrusage(resource.RUSAGE_SELF).ru_maxrss / 1024.0
+
+
+def _run_case(scene, case_values, record_times, snapshots):
+    """Worker: run one case; its Dataset gets the peak resident memory of the run."""
     from .run import run
     from .schemes import Diverged
 
+    _peak_memory_reset()  # workers are reused: the peak must be this case's
     sc = scene.with_(snapshots=tuple(snapshots), **case_values)
     try:
         ds = run(sc, progress=False, record_times=record_times)
     except Diverged as err:
         ds = err.dataset
-    peak = resource.getrusage(resource.RUSAGE_SELF).ru_maxrss / 1024.0  # kB -> MB on Linux
-    ds.attrs["memory_peak_mb"] = float(peak)
+    ds.attrs["memory_peak_mb"] = _peak_memory_mb()
     return ds
 
 
@@ -91,7 +111,7 @@ class Study:
     n_compare : int
         Number of common times at which whole fields are compared (default 10, T included).
     workers : int
-        Local processes (spawned, one fresh process per case) running cases in
+        Local processes (spawned, reused across cases) running cases in
         parallel (default 2); 0 runs the cases in this process, one after another.
     client : dask.distributed.Client or str, optional
         Run the cases on this cluster (or scheduler address) instead.
@@ -192,9 +212,10 @@ class Study:
                 bar.update()
         finally:
             bar.close()
-        elapsed = time.perf_counter() - t0
+        executed = time.perf_counter() - t0
         runs = {c: results.load(paths[c]) for c in todo}
-        self.dataset = self._evaluate(runs, record, compare, elapsed, len(missing))
+        self.dataset = self._evaluate(runs, record, compare, executed, len(missing))
+        self.overhead["evaluate"] = time.perf_counter() - t0 - executed
         return self.dataset
 
     def _execute(self, cases, record, compare):
@@ -217,9 +238,8 @@ class Study:
             for a, c in zip(args, cases):
                 yield c, _run_case(*a)
             return
-        kwargs = {"max_workers": max(1, self.workers), "mp_context": multiprocessing.get_context("spawn")}
-        if sys.version_info >= (3, 11):
-            kwargs["max_tasks_per_child"] = 1  # a fresh process per case: exact peak memory, no state carried over
+        # spawn, not fork: forking after NGSolve's TaskManager hangs; workers are reused across cases
+        kwargs = {"max_workers": max(1, min(self.workers, len(cases))), "mp_context": multiprocessing.get_context("spawn")}
         with ProcessPoolExecutor(**kwargs) as pool:
             futures = {pool.submit(_run_case, *a): c for a, c in zip(args, cases)}
             for fut in as_completed(futures):
@@ -377,7 +397,7 @@ class Study:
             "history": f"workbench study {self.scene.name}",
         } | {k: attr_value(v) for k, v in self.scene.values.items() if k not in ("h", "k", "order", "scheme")}
         # machinery overhead is only meaningful for a run that computed everything now
-        self.overhead = dict(elapsed=elapsed, cases=case_cost, new_cases=n_new)
+        self.overhead = dict(execute=elapsed, cases=case_cost, new_cases=n_new)
         return ds
 
     def _fit(self, ds):
