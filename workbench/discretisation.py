@@ -43,6 +43,9 @@ class Discretisation:
     node_xyz: np.ndarray = field(default=None)
     vertex_dofs: np.ndarray = field(default=None)  # (vertex, component) -> dof
     vertex_xyz: np.ndarray = field(default=None)
+    memory_kind: str = "none"  # Model B: "prony", "kernel" or "none"
+    memory: list = field(default_factory=list)
+    contact_weights: np.ndarray | None = None  # Model B: w_i of the contact vertices
     dirichlet_dofs: np.ndarray = field(default=None)
     probe_points: object = None
 
@@ -170,7 +173,7 @@ class Loads:
 
 
 def build(scene) -> Discretisation:
-    """Assemble the scene's constant parts on its mesh.
+    """Assemble the scene's constant parts on its mesh (Model B: see :func:`build_memory`).
 
     Examples
     --------
@@ -179,6 +182,8 @@ def build(scene) -> Discretisation:
     >>> d.ndof, d.beta_dofs.size, d.contact_form is not None
     (11, 1, True)
     """
+    if scene.model == "B":
+        return build_memory(scene)
     mesh = meshes.build(scene)
     dim, order = scene.dim, scene["order"]
     fes = _vector_space(scene, mesh, order)
@@ -197,21 +202,7 @@ def build(scene) -> Discretisation:
         u.Set(scene["u0"].cf())
     contact_name = BOUNDARIES[scene.geometry]["contact"]
     d = Discretisation(scene, mesh, fes, t, u, v, viscous, elastic, contact_name)
-
-    ngmesh = mesh.ngmesh  # keep the wrapper alive: Coordinates() is a view into it
-    coords = np.array(ngmesh.Coordinates())[:, :dim]
-    d.vertex_xyz = coords
-    d.vertex_dofs = _vertex_dofs(fes, dim, mesh.nv)
-    nodes = _boundary_vertices(mesh, contact_name)
-    d.node_dofs, d.node_xyz = d.vertex_dofs[nodes], coords[nodes]
-    free = np.array(fes.FreeDofs(), dtype=bool)
-    d.dirichlet_dofs = np.nonzero(~free)[0]
-
-    xs = [np.array([p[i] for p in scene["probes"]]) for i in range(dim)]
-    d.probe_points = mesh(*xs)
-
-    d.loads = Loads(scene, fes, t, d.vertex_dofs, coords)
-
+    _index_arrays(d)
     terms = scene.terms
     if "adhesion" in terms:
         _add_bonding(d)
@@ -219,6 +210,73 @@ def build(scene) -> Discretisation:
     if integrand is not None:
         d.contact_form = ngs.LinearForm(fes)
         d.contact_form += integrand.Compile() * ngs.ds(contact_name)
+    return d
+
+
+def _index_arrays(d: Discretisation) -> None:
+    """Vertex/contact-node dof tables, Dirichlet dofs, probe points and loads."""
+    mesh, fes, scene, dim = d.mesh, d.fes, d.scene, d.dim
+    ngmesh = mesh.ngmesh  # keep the wrapper alive: Coordinates() is a view into it
+    coords = np.array(ngmesh.Coordinates())[:, :dim]
+    d.vertex_xyz = coords
+    d.vertex_dofs = _vertex_dofs(fes, dim, mesh.nv)
+    nodes = _boundary_vertices(mesh, d.contact_name)
+    d.node_dofs, d.node_xyz = d.vertex_dofs[nodes], coords[nodes]
+    free = np.array(fes.FreeDofs(), dtype=bool)
+    d.dirichlet_dofs = np.nonzero(~free)[0]
+
+    xs = [np.array([p[i] for p in scene["probes"]]) for i in range(dim)]
+    d.probe_points = mesh(*xs)
+
+    d.loads = Loads(scene, fes, d.t, d.vertex_dofs, coords)
+
+
+def build_memory(scene) -> Discretisation:
+    """Model B: the elastic stiffness K_A, the memory stiffnesses and the nodal contact weights.
+
+    ``viscous`` is None (no viscosity); ``elastic`` is K_A; ``memory`` holds
+    (K_Ci, tau_i) for a Prony series or (K_C, b) for a general kernel;
+    ``contact_weights`` are w_i = int_Gamma3 phi_i da of the contact vertices.
+    """
+    from .physics import memory
+
+    if scene["order"] != 1:
+        raise ValueError(f"order = {scene['order']}: Model B constrains the contact vertices, so order must be 1")
+    mesh = meshes.build(scene)
+    dim = scene.dim
+    fes = _vector_space(scene, mesh, 1)
+    u_trial, w = fes.TnT()
+
+    def stiffness(tensor):
+        form = ngs.BilinearForm(fes, symmetric=True)
+        form += kelvin_voigt.energy_product(tensor, u_trial, w, dim) * ngs.dx
+        form.Assemble()
+        return form
+
+    A = kelvin_voigt.scalar(scene["a"]) if dim == 1 else \
+        memory.tensor_of(scene["E"], scene["nu"], dim)
+    elastic = stiffness(A)
+    t = ngs.Parameter(0.0)
+    u, v = ngs.GridFunction(fes, "u"), ngs.GridFunction(fes, "velocity")
+    if dim == 1:
+        u.Set(scene["u0"].cf())
+    contact_name = BOUNDARIES[scene.geometry]["contact"]
+    d = Discretisation(scene, mesh, fes, t, u, v, None, elastic, contact_name)
+    _index_arrays(d)
+    d.memory_kind = "prony" if scene["prony"] else ("kernel" if "memory" in scene.terms else "none")
+    if d.memory_kind == "prony":
+        d.memory = [(stiffness(C), C, tau) for C, tau in memory.prony_tensors(scene)]
+    elif d.memory_kind == "kernel":
+        C, b = memory.kernel_tensor(scene)
+        d.memory = [(stiffness(C), C, b)]
+    else:
+        d.memory = []
+    p1 = ngs.H1(mesh, order=1)
+    lf = ngs.LinearForm(p1)
+    lf += p1.TestFunction() * ngs.ds(contact_name)
+    lf.Assemble()
+    vertices = _boundary_vertices(mesh, contact_name)
+    d.contact_weights = lf.vec.FV().NumPy()[vertices].copy()
     return d
 
 

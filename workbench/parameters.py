@@ -183,7 +183,8 @@ PARAMETERS: dict[str, Param] = {p.name: p for p in [
     _p("T", 1.0, "s", "final time", **_POS),
     _p("k", 0.01, "s", "time step (uniform grid; the last step is not longer than k)", **_POS),
     _p("scheme", "explicit", "", "time scheme: 'explicit' = the paper's (contact lagged, conditionally stable), "
-       "'implicit' = backward Euler with implicit contact (stable)", "choice", choices=("explicit", "implicit")),
+       "'implicit' = backward Euler with implicit contact (stable); Model B: 'vi' (one variational inequality "
+       "per step)", "choice", choices=("explicit", "implicit", "vi")),
     _p("allow_unstable", False, "", "run the explicit scheme even when k exceeds its predicted stability limit",
        "flag"),
     _p("solver", "auto", "", "linear solver for the constant matrix: banded Cholesky (RCM order), NGSolve's "
@@ -209,6 +210,16 @@ PARAMETERS: dict[str, Param] = {p.name: p for p in [
     _p("c_tau", 0.0, "Pa/m", "tangential glue stiffness: p_tau(beta) = c_tau beta", **_NONNEG),
     _p("bonding_truncation", "tension", "", "R in the bonding law: symmetric clip (eq. 3.7 as printed) or tension only",
        "choice", choices=("tension", "symmetric")),
+    # Model B: memory and the unilateral, multivalued normal compliance
+    _p("F", 0.0, "Pa", "yield limit of the foundation layer: psi(r) = F r_+ + (c/2) r_+^2", lower=0.0),
+    _p("c", 0.0, "Pa/m", "hardening stiffness of the foundation layer (psi above)", lower=0.0),
+    _p("kernel", "0", "1/s", "relaxation kernel shape b(t): B(t) = b(t) C(kernel_E, kernel_nu)", "expr",
+       variables=("t",)),
+    _p("kernel_E", 0.0, "Pa", "Young's modulus of the kernel tensor C (rod: its modulus); negative = relaxation"),
+    _p("kernel_nu", 0.3, "1", "Poisson's ratio of the kernel tensor C", lower=-1.0, upper=0.5, lower_open=True,
+       upper_open=True),
+    _p("prony", (), "Pa, 1, s", "Prony series B(t) = sum_i C(E_i, nu_i) exp(-t / tau_i): list of (E_i, nu_i, tau_i) "
+       "(rod: (E_i, tau_i))", "points"),
     # loads and prescribed displacements
     _p("delta", "0", "m", "prescribed rod-end displacement u(0, t)", "expr", variables=("t",)),
     _p("u0", "0", "m", "initial displacement (rod: must equal delta(0) at x = 0)", "expr", variables=("x", "y", "z")),

@@ -55,6 +55,15 @@ VARIABLES = {
     "snapshot_time": ("s", "time of the field snapshot"),
     "newton_iterations": ("1", "semismooth Newton iterations in the time step (all coupling passes)"),
     "coupling_passes": ("1", "passes of the (u, beta) coupling iteration in the time step"),
+    "iterations": ("1", "active-set iterations in the time step"),
+    "linear_solves": ("1", "linear solves in the time step (back-substitutions and active-set solves)"),
+    "n_separated": ("1", "contact nodes separated (u_nu < 0)"),
+    "n_stuck": ("1", "contact nodes at the layer surface below its yield limit (u_nu = 0)"),
+    "n_compliant": ("1", "contact nodes in the compliant layer (0 < u_nu < gap)"),
+    "n_rigid": ("1", "contact nodes at the rigid limit (u_nu = gap)"),
+    "complementarity": ("m", "max over contact nodes of |s - prox(s + rho lam / w)|"),
+    "contact_pressure": ("Pa", "contact pressure -sigma_nu at the contact vertices (lumped)"),
+    "contact_state": ("1", "contact state: -1 clamped, 0 separated, 1 stuck, 2 compliant, 3 rigid"),
     "probe_x": ("m", "probe x"), "probe_y": ("m", "probe y"), "probe_z": ("m", "probe z"),
     "node_x": ("m", "contact vertex x"), "node_y": ("m", "contact vertex y"), "node_z": ("m", "contact vertex z"),
     "facet_x": ("m", "contact facet midpoint x"), "facet_y": ("m", "contact facet midpoint y"),
@@ -110,6 +119,7 @@ class Recorder:
         self.u_contact = np.full((n, len(disc.node_dofs), dim), np.nan)
         self.beta = np.full((n, len(disc.beta_dofs)), np.nan) if disc.beta is not None else None
         self.extra = {}  # per-record diagnostics, e.g. newton_iterations
+        self.node_extra = {}  # per-record, per-contact-node values, e.g. contact_pressure
         self.n_recorded = 0
         self.snaps = []  # (time, u_dofs, stress, von_mises)
 
@@ -119,7 +129,7 @@ class Recorder:
     def wants_snapshot(self, step: int) -> bool:
         return step in self._want_snapshot
 
-    def record(self, step: int, **diagnostics) -> None:
+    def record(self, step: int, node_values=None, **diagnostics) -> None:
         d, i = self.disc, self.n_recorded
         u = d.u.vec.FV().NumPy()
         self.u_probe[i] = d.probe_values()
@@ -128,6 +138,8 @@ class Recorder:
             self.beta[i] = d.beta.vec.FV().NumPy()[d.beta_dofs]
         for key, val in diagnostics.items():
             self.extra.setdefault(key, np.full(len(self.record_steps), -1, dtype=type(val)))[i] = val
+        for key, arr in (node_values or {}).items():
+            self.node_extra.setdefault(key, np.zeros((len(self.record_steps), len(arr)), dtype=arr.dtype))[i] = arr
         self.n_recorded += 1
 
     def snapshot(self, step: int, stress_cf) -> None:
@@ -178,6 +190,8 @@ class Recorder:
             data["beta"] = _var(("time", "facet"), self.beta[:n], "beta")
         for key, arr in self.extra.items():
             data[key] = _var("time", arr[:n], key)
+        for key, arr in self.node_extra.items():
+            data[key] = _var(("time", "node"), arr[:n], key)
         if self.snaps:
             coords["snapshot_time"] = _var("snapshot", np.array([s[0] for s in self.snaps]), "snapshot_time")
             coords["stress_component"] = ("stress_component", list(STRESS_COMPONENTS[dim]))
@@ -224,7 +238,7 @@ def _cells(mesh, dim):
 def provenance(scene, extra: dict) -> dict:
     """Dataset attributes: every scene parameter, discretisation, cost and versions."""
     attrs = {"scene": scene.name, "base_scene": scene.base, "geometry": scene.geometry,
-             "description": scene.description, "model": "A", "terms": ",".join(scene.terms) or "none"}
+             "description": scene.description, "model": scene.model, "terms": ",".join(scene.terms) or "none"}
     attrs |= {k: attr_value(v) for k, v in scene.values.items()}
     attrs["parameters_json"] = json.dumps(scene.plain(), sort_keys=True)
     attrs |= {k: attr_value(v) for k, v in extra.items()}

@@ -35,15 +35,28 @@ _TIME = ("T", "k", "scheme", "order", "h", "solver", "allow_unstable")
 _OUTPUT = ("probes", "snapshots")
 _KV2D = ("E", "nu", "a1", "a2")
 
-#: Parameters each geometry uses; a scene knows exactly these (plus preset extras).
-GEOMETRY_PARAMETERS = {
-    "rod": ("length",) + _TIME + ("a", "b") + _CONTACT + ("delta", "u0") + _OUTPUT,
-    "slab": ("width", "height", "nx", "ny") + _TIME + _KV2D + _CONTACT + ("c_tau",)
-            + ("body_force", "traction_top", "traction_right", "point_force", "point_force_at") + _OUTPUT,
-    "block": ("width", "depth", "height", "nx", "ny", "nz") + _TIME + _KV2D + _CONTACT + ("c_tau",)
-             + ("body_force", "traction_top", "traction_right", "traction_front", "traction_back",
-                "point_force", "point_force_at") + _OUTPUT,
+_LOADS2D = ("body_force", "traction_top", "traction_right", "point_force", "point_force_at")
+_LOADS3D = ("body_force", "traction_top", "traction_right", "traction_front", "traction_back",
+            "point_force", "point_force_at")
+_TIME_B = ("T", "k", "scheme", "order", "h", "solver")
+_UNILATERAL = ("gap", "F", "c")
+_MEMORY = ("kernel", "kernel_E", "kernel_nu", "prony")
+
+#: Parameters each (geometry, model) uses; a scene knows exactly these (plus preset extras).
+MODEL_PARAMETERS = {
+    ("rod", "A"): ("length",) + _TIME + ("a", "b") + _CONTACT + ("delta", "u0") + _OUTPUT,
+    ("slab", "A"): ("width", "height", "nx", "ny") + _TIME + _KV2D + _CONTACT + ("c_tau",) + _LOADS2D + _OUTPUT,
+    ("block", "A"): ("width", "depth", "height", "nx", "ny", "nz") + _TIME + _KV2D + _CONTACT + ("c_tau",)
+                    + _LOADS3D + _OUTPUT,
+    ("rod", "B"): ("length",) + _TIME_B + ("a",) + _UNILATERAL + ("kernel", "kernel_E", "prony", "delta", "u0")
+                  + _OUTPUT,
+    ("slab", "B"): ("width", "height", "nx", "ny") + _TIME_B + ("E", "nu") + _UNILATERAL + _MEMORY + _LOADS2D
+                   + _OUTPUT,
+    ("block", "B"): ("width", "depth", "height", "nx", "ny", "nz") + _TIME_B + ("E", "nu") + _UNILATERAL + _MEMORY
+                    + _LOADS3D + _OUTPUT,
 }
+#: The schemes each model can run.
+MODEL_SCHEMES = {"A": ("explicit", "implicit"), "B": ("vi",)}
 DIMENSION = {"rod": 1, "slab": 2, "block": 3}
 #: Boundary names per geometry: the clamp (Gamma_1), the contact side (Gamma_3), the loadable rest.
 BOUNDARIES = {
@@ -67,6 +80,7 @@ class Preset:
     values: dict = field(default_factory=dict)
     extras: dict = field(default_factory=dict)  # preset-only parameters: name -> Param
     derive: object = None  # callable(values) -> dict of derived values (when not set by the user)
+    model: str = "A"
 
 
 def _tp3_delta(v):
@@ -82,6 +96,13 @@ _ROD_PAPER = dict(h=0.01, k=0.01, T=1.0, a=1.0, b=1.0, eps_a=0.0, beta0=1.0,
                   snapshots=(0.2, 0.4, 0.6, 0.8, 1.0))
 _SLAB_PAPER = dict(E=1000.0, nu=0.3, a1=30.0, a2=20.0, c_nu=1.0, gamma_nu=0.3, L=0.3, eps_a=0.0,
                    beta0=1.0, c_tau=0.0, T=1.0, snapshots=(0.1, 0.4, 0.6, 0.7, 0.8, 1.0))
+
+_MEMORY_ROD = dict(h=0.05, k=0.01, T=1.0, a=1.0, gap=0.1, F=0.05, c=1.0, scheme="vi",
+                   prony=((0.5, 0.2),), delta="0.3*sin(2*pi*t) - 0.05", u0="-0.05",
+                   snapshots=(0.25, 0.5, 0.75, 1.0))
+_MEMORY_2D = dict(width=2.0, height=1.0, h=0.05, k=0.02, T=1.0, E=1000.0, nu=0.3, scheme="vi",
+                  gap=0.02, F=20.0, c=2000.0, prony=((-1000.0, 0.3, 0.5),),
+                  traction_top="(0, -60*t*ifpos(x - 1, 1, -0.25))", snapshots=(0.25, 0.5, 0.75, 1.0))
 
 PRESETS: dict[str, Preset] = {
     "rod": Preset("rod", "1D Kelvin-Voigt rod (0, length), end x = 0 moved by delta(t), adhesive contact at x = length",
@@ -106,6 +127,15 @@ PRESETS: dict[str, Preset] = {
     "tp5": Preset("slab", "Paper test problem 5: slab under a periodic traction on the top side (inferred from OCR)",
                   dict(_SLAB_PAPER, h=0.0125, k=0.01, traction_top="(-10*sin(50*t), -sin(50*t))",
                        bonding_truncation="tension")),
+    "memory_rod": Preset("rod", "Model B: rod with long memory (Prony term), end x = 0 moved by delta(t), unilateral "
+                         "contact with a compliant layer of thickness gap at x = length", _MEMORY_ROD, model="B"),
+    "memory_slab": Preset("slab", "Model B: block (0,2) x (0,1) with long memory, clamped at x = 0, pressed down on "
+                          "its right half and lifted on its left half; layer of thickness gap on y = 0",
+                          _MEMORY_2D, model="B"),
+    "memory_block": Preset("block", "Model B: 3D block (0,2) x (0,0.5) x (0,1) with long memory, loaded as "
+                           "memory_slab; layer of thickness gap on z = 0",
+                           dict(_MEMORY_2D, depth=0.5, h=0.1, traction_top="(0, 0, -60*t*ifpos(x - 1, 1, -0.25))"),
+                           model="B"),
 }
 
 
@@ -130,6 +160,7 @@ class Scene:
     description: str = ""
     set_by_user: frozenset = frozenset()
     base: str = ""
+    model: str = "A"
 
     def __getitem__(self, key):
         return self.values[key]
@@ -140,12 +171,17 @@ class Scene:
 
     @property
     def terms(self) -> tuple:
-        """The contact-boundary terms this scene declares; only these are assembled.
+        """The terms this scene declares; only these are assembled.
 
-        ``compliance`` (normal compliance p_nu), ``adhesion`` (bonding field beta,
-        adhesive pull and the bonding ODE), ``glue`` (tangential glue c_tau beta R*(u_tau)).
+        Model A: ``compliance`` (normal compliance p_nu), ``adhesion`` (bonding
+        field beta, adhesive pull and the bonding ODE), ``glue`` (tangential glue
+        c_tau beta R*(u_tau)). Model B: ``unilateral`` (the constraint u_nu <= gap
+        with the layer psi) and ``memory`` (a nonzero relaxation kernel).
         """
         v = self.values
+        if self.model == "B":
+            memory = bool(v["prony"]) or not v["kernel"].is_zero() and v["kernel_E"] != 0
+            return ("unilateral",) + (("memory",) if memory else ())
         out = []
         if v["contact"] and v["c_nu"] > 0:
             out.append("compliance")
@@ -173,7 +209,7 @@ class Scene:
 
 def _known(base):
     preset = PRESETS[base]
-    return {n: PARAMETERS[n] for n in GEOMETRY_PARAMETERS[preset.geometry]} | preset.extras
+    return {n: PARAMETERS[n] for n in MODEL_PARAMETERS[preset.geometry, preset.model]} | preset.extras
 
 
 def names() -> list[str]:
@@ -188,7 +224,7 @@ def make(name: str, overrides: dict | None = None, *, base: str | None = None, d
         raise ParameterError(f"unknown scene {base!r}; built-in scenes: {', '.join(PRESETS)}"
                              + closest_name(base, PRESETS) + " (or give a .toml file)")
     preset = PRESETS[base]
-    known = {n: PARAMETERS[n] for n in GEOMETRY_PARAMETERS[preset.geometry]} | preset.extras
+    known = _known(base)
     overrides = dict(overrides or {})
     for key in overrides:
         if key not in known:
@@ -206,8 +242,11 @@ def make(name: str, overrides: dict | None = None, *, base: str | None = None, d
         values["snapshots"] = tuple(t for t in values["snapshots"] if t <= values["T"])
     if "point_force_at" in values and not values["point_force_at"]:
         values["point_force_at"] = (_default_probes(preset.geometry, values)[-1],)
-    _check_consistency(name, preset.geometry, values)
-    return Scene(name, preset.geometry, values, description or preset.description, frozenset(overrides), base)
+    if "scheme" not in overrides and preset.model == "B":
+        values["scheme"] = "vi"
+    _check_consistency(name, preset.geometry, values, preset.model)
+    return Scene(name, preset.geometry, values, description or preset.description, frozenset(overrides), base,
+                 preset.model)
 
 
 def _default_probes(geometry, v):
@@ -228,8 +267,13 @@ def _extent(geometry, v):
     return (v["width"], v["depth"], v["height"])
 
 
-def _check_consistency(name, geometry, v):
+def _check_consistency(name, geometry, v, model="A"):
     """Checks that involve several parameters."""
+    if v["scheme"] not in MODEL_SCHEMES[model]:
+        raise ParameterError(f"scheme = {v['scheme']!r} does not apply to a Model {model} scene; "
+                             f"allowed: {' | '.join(repr(s) for s in MODEL_SCHEMES[model])}")
+    if model == "B":
+        _check_memory(geometry, v)
     if v["k"] > v["T"]:
         raise ParameterError(f"k = {v['k']:g} is larger than T = {v['T']:g}; allowed: 0 < k <= T")
     ext = _extent(geometry, v)
@@ -244,11 +288,27 @@ def _check_consistency(name, geometry, v):
     bad = [t for t in v["snapshots"] if t > v["T"] * (1 + 1e-12)]
     if bad:
         raise ParameterError(f"snapshots: time {bad[0]:g} is after T = {v['T']:g}; allowed: 0 <= t <= T")
-    if geometry == "rod":
+    if geometry == "rod" and "u0" in v:
         u0_at_0, d0 = v["u0"](x=0.0), v["delta"](t=0.0)
         if not math.isclose(u0_at_0, d0, rel_tol=1e-12, abs_tol=1e-12):
             raise ParameterError(f"u0 = {v['u0']} gives u0(0) = {u0_at_0:g} but delta(0) = {d0:g}; "
                                  "the initial displacement must match the prescribed end (compatibility)")
+
+
+def _check_memory(geometry, v):
+    width = 2 if geometry == "rod" else 3
+    for i, term in enumerate(v["prony"]):
+        if len(term) not in (width, 3) or (geometry != "rod" and len(term) != 3):
+            want = "(E_i, tau_i)" if geometry == "rod" else "(E_i, nu_i, tau_i)"
+            raise ParameterError(f"prony: term {i} = {term} must be {want}")
+        tau = term[-1]
+        if not tau > 0:
+            raise ParameterError(f"prony: term {i} has tau = {tau:g}; allowed: tau_i > 0")
+        if len(term) == 3 and not -1.0 < term[1] < 0.5:
+            raise ParameterError(f"prony: term {i} has nu = {term[1]:g}; allowed: -1 < nu_i < 0.5")
+    if v["prony"] and not v["kernel"].is_zero():
+        raise ParameterError("give the memory either as kernel (quadrature, O(n) work per step) or as prony "
+                             "(exact recursion, O(1)), not both")
 
 
 def from_toml(path, overrides: dict | None = None) -> Scene:

@@ -304,7 +304,8 @@ class Study:
             if "beta" in ds:
                 ref_end = sol(t_rec)[1]
         parts = np.array(parts)
-        out["error_V"], out["error_Q"], out["error_beta"] = np.nanmax(parts, axis=0)
+        out["error_V"], out["error_Q"] = np.max(parts[:, :2], axis=0)
+        out["error_beta"] = float(np.max(parts[:, 2])) if np.isfinite(parts[:, 2]).all() else np.nan
         out["error"] = float(np.max(np.nansum(parts, axis=1)))
         out["error_probe"] = np.max(np.linalg.norm(ds.u_probe.values - ref_probe, axis=-1), axis=0)
         if "beta" in ds:
@@ -387,7 +388,7 @@ class Study:
         ref_desc = self.reference_spec if isinstance(self.reference_spec, str) else \
             (json.dumps(self.ref_case.values()) if self.ref_case else type(self.reference_spec).__name__)
         ds.attrs = {
-            "scene": self.scene.name, "geometry": self.scene.geometry, "model": "A",
+            "scene": self.scene.name, "geometry": self.scene.geometry, "model": self.scene.model,
             "reference": ref_desc,
             "reference_case": self.ref_case.key if self.ref_case else "",
             "transfer": "; ".join(sorted(methods)) or "same mesh / exact solution",

@@ -4,11 +4,14 @@
 implicit, elastic and contact terms lagged; one back-substitution per step.
 ``implicit`` — backward Euler with the contact terms implicit (semismooth Newton
 condensed onto the contact dofs): unconditionally stable, first order.
+``vi`` — Model B: one variational inequality per step (long memory, unilateral
+constraint with a compliant layer), primal-dual active set on the contact nodes.
 """
 from .explicit_euler import ExplicitEuler
 from .implicit_euler import ImplicitEuler, NewtonFailed
+from .memory_vi import MemoryVI
 from .stepping import Diverged, march, time_grid
 
-SCHEMES = {"explicit": ExplicitEuler, "implicit": ImplicitEuler}
+SCHEMES = {"explicit": ExplicitEuler, "implicit": ImplicitEuler, "vi": MemoryVI}
 
-__all__ = ["SCHEMES", "ExplicitEuler", "ImplicitEuler", "Diverged", "NewtonFailed", "march", "time_grid"]
+__all__ = ["SCHEMES", "ExplicitEuler", "ImplicitEuler", "MemoryVI", "Diverged", "NewtonFailed", "march", "time_grid"]

@@ -74,8 +74,9 @@ def march(disc, scheme, times, recorder, *, progress=None, limit=None):
 
     u_np = disc.u.vec.FV().NumPy()
     bound = limit or math.inf
+    nodes = getattr(scheme, "node_values", None)
     if recorder.wants(0):
-        recorder.record(0, **scheme.diagnostics(initial=True))
+        recorder.record(0, node_values=nodes() if nodes else None, **scheme.diagnostics(initial=True))
     if recorder.wants_snapshot(0):
         recorder.snapshot(0, scheme.stress())
     n_steps = len(times) - 1
@@ -100,7 +101,7 @@ def march(disc, scheme, times, recorder, *, progress=None, limit=None):
                                f"with the {scheme.name} scheme, k = {times[n] - times[n - 1]:.3g} s",
                                step=n, time=times[n])
             if recorder.wants(n):
-                recorder.record(n, **scheme.diagnostics())
+                recorder.record(n, node_values=nodes() if nodes else None, **scheme.diagnostics())
             if recorder.wants_snapshot(n):
                 recorder.snapshot(n, scheme.stress())
             bar.update()
