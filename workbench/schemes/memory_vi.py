@@ -58,7 +58,8 @@ class MemoryVI:
         # memory: Prony histories H_i (dof vectors) or the stored u_j for a general kernel
         n = d.ndof
         self.histories = [np.zeros(n) for _ in d.memory] if d.memory_kind == "prony" else []
-        self.stored, self.times = [], [0.0]
+        self.stored = np.empty((64, n)) if d.memory_kind == "kernel" else None
+        self.times = [0.0]
         self.mem_gfs = None
         self.k_last = 0.0
         self.diag = {}
@@ -77,11 +78,16 @@ class MemoryVI:
                 self._add_matvec(K, H, out_np)
         elif d.memory_kind == "kernel":
             K, _, b = d.memory[0]
-            self.stored.append(u_prev.copy())
+            n = len(self.times) - 1  # u_0 ... u_{n} stored after this append
+            if n >= self.stored.shape[0]:  # grow the history buffer by doubling
+                grown = np.empty((2 * self.stored.shape[0], self.stored.shape[1]))
+                grown[:n] = self.stored[:n]
+                self.stored = grown
+            self.stored[n] = u_prev
             self.times.append(t_next)
             t = np.asarray(self.times)
             weights = np.diff(t) * np.asarray(b(t=t[-1] - t[:-1]), dtype=float)
-            H = weights @ np.asarray(self.stored)  # O(n) work: the whole history
+            H = weights @ self.stored[: n + 1]  # O(n) work: the whole history
             self.histories = [H]
             self._add_matvec(K, H, out_np)
 
