@@ -19,13 +19,14 @@ import numpy as np
 
 import workbench
 from workbench import discretisation, schemes
+from workbench.run import _threads
 
 
 def scene(nx, solver):
     return workbench.scene("tp5", nx=nx, ny=max(1, nx // 10), k=1e-4, solver=solver)
 
 
-def per_step(nx, steps, solver="auto"):
+def per_step(nx, steps, solver="auto", threads=None):
     sc = scene(nx, solver)
     t0 = time.perf_counter()
     d = discretisation.build(sc)
@@ -37,16 +38,17 @@ def per_step(nx, steps, solver="auto"):
     out = np.zeros(d.ndof)
     solve, step = [], []
     t = 0.0
-    for _ in range(steps):
-        a = time.perf_counter()
-        sch.solver.solve(rhs, out)
-        solve.append(time.perf_counter() - a)
-        a = time.perf_counter()
-        sch.step(t, t + 1e-4)
-        step.append(time.perf_counter() - a)
-        t += 1e-4
+    with _threads(threads):
+        for _ in range(steps):
+            a = time.perf_counter()
+            sch.solver.solve(rhs, out)
+            solve.append(time.perf_counter() - a)
+            a = time.perf_counter()
+            sch.step(t, t + 1e-4)
+            step.append(time.perf_counter() - a)
+            t += 1e-4
     s, f = statistics.median(step), statistics.median(solve)
-    return dict(nx=nx, ndof=d.ndof, solver=sch.solver.name, setup_s=setup, factor_s=factor, step_ms=1e3 * s,
+    return dict(nx=nx, ndof=d.ndof, solver=sch.solver.name, threads=threads or 1, setup_s=setup, factor_s=factor, step_ms=1e3 * s,
                 solve_ms=1e3 * f, ratio=s / f)
 
 
@@ -61,14 +63,16 @@ def main():
     ap.add_argument("--sizes", type=int, nargs="*", default=[220, 440, 900])
     ap.add_argument("--steps", type=int, default=40)
     ap.add_argument("--solvers", nargs="*", default=["banded", "sparsecholesky"])
+    ap.add_argument("--threads", type=int, nargs="*", default=[1, 2], help="TaskManager threads to compare")
     ap.add_argument("--thousand", type=int, nargs="*", default=[80, 160, 320])
     args = ap.parse_args()
     rows = []
     for nx in args.sizes:
       for solver in args.solvers:
-        r = per_step(nx, args.steps, solver)
+       for threads in args.threads:
+        r = per_step(nx, args.steps, solver, threads)
         rows.append(r)
-        print(f"nx={r['nx']:4d} ndof={r['ndof']:7d} {r['solver']:>14}  step {r['step_ms']:8.2f} ms  floor (solve) {r['solve_ms']:8.2f} ms"
+        print(f"nx={r['nx']:4d} ndof={r['ndof']:7d} {r['solver']:>14} threads={threads}  step {r['step_ms']:8.2f} ms  floor (solve) {r['solve_ms']:8.2f} ms"
               f"  ratio {r['ratio']:.2f}  (factor {r['factor_s']:.2f} s, setup {r['setup_s']:.2f} s)", flush=True)
     for nx in args.thousand:
         r = thousand_steps(nx)

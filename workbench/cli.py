@@ -75,7 +75,7 @@ def cmd_run(args) -> int:
 
     overrides = _overrides(args)
     try:
-        ds = run(args.scene, progress=False if args.no_progress else None, **overrides)
+        ds = run(args.scene, progress=False if args.no_progress else None, threads=args.threads, **overrides)
         code = 0
     except Diverged as err:
         print(f"error: {err}", file=sys.stderr)
@@ -87,6 +87,11 @@ def cmd_run(args) -> int:
     if args.plot:
         plotting.overview(ds, args.plot)
         print(f"wrote {args.plot}")
+    if args.vtk:
+        from . import vtk
+
+        files = vtk.export(ds, args.vtk)
+        print(f"wrote {len(files)} VTK files to {args.vtk}/ (open the .pvd in ParaView)")
     if not args.output and not args.plot:
         print(_summary(ds))
     return code
@@ -164,7 +169,9 @@ def build_parser() -> argparse.ArgumentParser:
     _add_scene_args(p)
     p.add_argument("-o", "--output", help="netCDF archive to write (atomically)")
     p.add_argument("--plot", help="PNG overview plot to write")
+    p.add_argument("--vtk", metavar="DIR", help="write VTK (.vtu + .pvd) files of the snapshots for ParaView")
     p.add_argument("--no-progress", action="store_true", help="no progress bar")
+    p.add_argument("--threads", type=int, help="NGSolve TaskManager threads for assembly (default: off)")
     p.set_defaults(func=cmd_run)
     p = sub.add_parser("study", help="refinement sweep over h, k, order, scheme: errors, observed orders, cost")
     p.add_argument("scene", help="built-in scene name or .toml file")
