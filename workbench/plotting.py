@@ -8,6 +8,7 @@ from __future__ import annotations
 from pathlib import Path
 
 import matplotlib
+import matplotlib.ticker
 
 matplotlib.use("Agg", force=False)
 import matplotlib.pyplot as plt  # noqa: E402
@@ -85,6 +86,7 @@ def convergence(study_ds, path=None, norms=("error", "error_V", "error_Q", "erro
                 ref = y[good][0] * (x[good] / x[good][0])
                 ax.loglog(x[good], ref, ":", color="gray")
         ax.set(xlabel=along, title=norm)
+        ax.xaxis.set_minor_formatter(matplotlib.ticker.NullFormatter())
         ax.legend(fontsize=7, title="fitted order", title_fontsize=7)
     fig.suptitle(f"{study_ds.attrs.get('scene')}: reference {study_ds.attrs.get('reference')} "
                  f"(dotted: slope 1)", fontsize=9)
