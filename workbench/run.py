@@ -80,9 +80,10 @@ def run(scene, *, progress=None, record_times=None, times=None, limit=None, thre
 
     with results.Clock() as setup:
         disc = discretisation.build(sc)
+        scheme = SCHEMES[sc["scheme"]](disc)
         checks = {}
         if sc["scheme"] == "explicit":
-            est = stability.critical_step(sc, disc)
+            est = stability.critical_step(sc, disc, scheme.solver)
             k_max = float(np.max(np.diff(grid)))
             checks = {"k_crit": est.k_crit, "stability_override": 0}
             if k_max > est.k_crit:
@@ -91,7 +92,6 @@ def run(scene, *, progress=None, record_times=None, times=None, limit=None, thre
                 warnings.warn(f"k = {k_max:.3g} s > predicted k_crit = {est.k_crit:.3g} s: running the explicit "
                               "scheme anyway (allow_unstable)", RuntimeWarning, stacklevel=2)
                 checks["stability_override"] = 1
-        scheme = SCHEMES[sc["scheme"]](disc)
     recorder = results.Recorder(disc, grid, record, snaps)
     if limit is None:
         limit = 10.0 * max(sc.values.get(k, 0.0) for k in ("length", "width", "depth", "height"))

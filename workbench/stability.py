@@ -53,8 +53,12 @@ def boundary_springs(scene) -> tuple[float, float]:
     return normal, tangential
 
 
-def critical_step(scene, d=None) -> Estimate:
-    """Predict k_crit for the explicit scheme on ``scene`` (``d``: an existing discretisation)."""
+def critical_step(scene, d=None, solver=None) -> Estimate:
+    """Predict k_crit for the explicit scheme on ``scene``.
+
+    ``d`` (an existing discretisation) and ``solver`` (its factored K_A, e.g. the
+    explicit scheme's) avoid rebuilding and refactoring.
+    """
     d = d or discretisation.build(scene)
     s_nu, s_tau = boundary_springs(scene)
     u, w = d.fes.TnT()
@@ -75,7 +79,7 @@ def critical_step(scene, d=None) -> Estimate:
     free = np.nonzero(np.array(d.fes.FreeDofs(), dtype=bool))[0]
     K = solvers.to_scipy(stiff.mat)[free][:, free]
     KA = solvers.to_scipy(d.viscous.mat)[free][:, free]
-    inv = solvers.factor(d.viscous.mat, d.fes.FreeDofs(), d.u.vec, d.scene["solver"])
+    inv = solver or solvers.factor(d.viscous.mat, d.fes.FreeDofs(), d.u.vec, d.scene["solver"])
     full_in, full_out = np.zeros(d.ndof), np.zeros(d.ndof)
 
     def apply_inverse(x):
