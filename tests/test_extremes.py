@@ -161,20 +161,24 @@ def test_stiff_adhesion_explicit_rod_matches_ode():
     assert abs(float(ds.beta[-1, 0]) - _tp1_ode_beta(1e6, 100 * k)) <= 0.05
 
 
-@pytest.mark.xfail(strict=True, raises=AssertionError, reason=(
-    "implicit scheme, tp1 with gamma_nu = 1e4, h = 0.1, k = 0.01: beta(1, T=1) = 0 and u(1) = -0.6 "
-    "(complete debonding in the first step) while the reduced ODE gives beta = 0.854, u(1) = -8.2e-5; "
-    "happens whenever k gamma_nu L^2 >~ 1 with |u_nu| > L at the start of a step (the beta predictor "
-    "from u_{n-1} switches the glue off and (beta = 0, u separated) is a consistent fixed point)"))
-def test_stiff_adhesion_implicit_rod_matches_ode():
-    """Rod of test problem 1 with gamma_nu = 1e4 and the implicit scheme at k = 0.01 (k_crit of the explicit
-    scheme: 2e-4): beta(1, 1) within 0.05 of the reduced ODE (0.854). The same scheme at k = 1e-4 is
-    within 0.003, so the tolerance is 17 x the resolved error; a stable scheme should not turn a 15 %
-    decrease of beta into complete debonding."""
-    ds = run("tp1", gamma_nu=1e4, h=0.1, k=0.01, T=1.0, scheme="implicit")
-    assert ds.attrs["status"] == "complete"
+def test_stiff_adhesion_implicit_rod():
+    """Rod of test problem 1 with gamma_nu = 1e4, implicit scheme.
+
+    The end starts 0.6 away (beyond L): the glue snaps it back within ~1e-4 s and beta falls by 15% during
+    that layer (reduced ODE: 0.854). At k = 0.01 (k gamma_nu L^2 = 9) no first-order step resolves the
+    layer: the run must stay bounded and attached (the glue holds the end near the foundation, as in the
+    ODE), beta admissible, and it must say so (a warning and ``bonding_resolved = 0``). At k = 1e-4
+    (k gamma_nu L^2 = 0.09, just resolved) beta is within 0.01 of the ODE, at k = 1e-5 within 0.002.
+    (Found by this suite: an earlier beta predictor debonded completely in the first step, beta = 0.)"""
+    with pytest.warns(RuntimeWarning, match="bonding field is not resolved"):
+        ds = workbench.run("tp1", gamma_nu=1e4, h=0.1, k=0.01, T=1.0, scheme="implicit", progress=False)
+    assert ds.attrs["status"] == "complete" and ds.attrs["bonding_resolved"] == 0
     assert_beta_admissible(ds)
-    assert abs(float(ds.beta[-1, 0]) - _tp1_ode_beta(1e4, 1.0)) <= 0.05
+    assert abs(float(ds.u_contact[-1, 0, 0])) < 1e-3 and float(ds.beta[-1, 0]) > 0.8
+    for k, tol in ((1e-4, 0.01), (1e-5, 0.002)):
+        fine = run("tp1", gamma_nu=1e4, h=0.1, k=k, T=0.01, scheme="implicit")
+        assert fine.attrs["bonding_resolved"] == 1
+        assert abs(float(fine.beta[-1, 0]) - _tp1_ode_beta(1e4, 0.01)) <= tol
 
 
 @pytest.mark.parametrize("scheme, k", [("implicit", 0.01), ("explicit", 1e-3)])
@@ -260,31 +264,20 @@ def test_newton_iterations_stay_small():
     assert max(worst.values()) <= 10, worst
 
 
-@pytest.mark.xfail(strict=True, raises=workbench.Diverged, reason=(
-    "OscillationWatch has no noise floor: at the equilibrium under a constant load the velocity is round-off "
-    "(~1e-11 m/s) and its sign can alternate for 12 steps. workbench.run('slab', h=0.05, c_nu=1, "
-    "traction_top='(0, -1)', k=0.04, T=8) (explicit, k < k_crit = 0.0455) raises Diverged 'a sign-alternating "
-    "oscillation of the velocity, not decaying over 12 steps (the scheme is unstable at this step size) at step 129 "
-    "(t = 5.16 s)'; the implicit run with k=0.009280408877267919, T=9.280408877267919 the same at step 674 "
-    "(t = 6.255 s)"))
 @pytest.mark.parametrize("scheme, k, T", [("explicit", 0.04, 8.0),
                                           ("implicit", 0.009280408877267919, 9.280408877267919)])
 def test_converged_steady_state_is_not_flagged(scheme, k, T):
     """A run that has reached its steady state under a constant load completes: the blow-up detector must not
     take round-off velocity (1e-11 m/s against 22 m/s in the first step) for an instability, least of all
-    for the explicit scheme at a k the k_crit check accepted."""
+    for the explicit scheme at a k the k_crit check accepted. (Found by this suite; fixed by a noise floor.)"""
     ds = workbench.run("slab", progress=False, h=0.05, c_nu=1.0, traction_top="(0, -1)", scheme=scheme, k=k, T=T)
     assert ds.attrs["status"] == "complete"
 
 
-@pytest.mark.xfail(strict=True, raises=pytest.fail.Exception, reason=(
-    "explicit scheme with allow_unstable at k = 0.01 = 7.3 k_crit (STIFF slab, h=0.05, load (0, -sin(3 pi t)), "
-    "T=0.5) completes with status 'complete': the contact nodes bounce in and out of the one-sided foundation "
-    "(u_nu down to -7.7 m, under the 10 m bound, not alternating every step), max penetration 0.575 m vs 0.011 m "
-    "(implicit), beta(1, 0) = 0.653 vs 0.993"))
 def test_unstable_explicit_run_is_stopped():
     """Explicit scheme far above k_crit (allow_unstable): the run is stopped as Diverged instead of returning
-    a 'complete' result that is 50 x off the implicit one."""
+    a 'complete' result that is 50 x off the implicit one: the contact nodes bounce in and out of the
+    foundation every ~4 steps (found by this suite; caught by the chatter watch)."""
     with warnings.catch_warnings(), pytest.raises(workbench.Diverged):
         warnings.simplefilter("ignore", RuntimeWarning)  # the allow_unstable warning is expected
         workbench.run("slab", progress=False, allow_unstable=True, **STIFF, traction_top=SINE, T=0.5, k=0.01)

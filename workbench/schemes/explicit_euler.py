@@ -22,6 +22,7 @@ from ..physics import kelvin_voigt
 
 class ExplicitEuler:
     name = "explicit"
+    watch_chatter = True  # its unstable contact mode can bounce instead of alternating
 
     def __init__(self, disc):
         self.d = d = disc

@@ -41,11 +41,12 @@ class OscillationWatch:
     live, hidden in the whole vector by the smooth bending motion).
     """
 
-    def __init__(self, v: np.ndarray, parts, window: int = 12):
-        self.v, self.parts, self.window = v, parts, window
+    def __init__(self, v: np.ndarray, parts, window: int = 12, noise: float = 1e-8):
+        self.v, self.parts, self.window, self.noise = v, parts, window, noise
         self.prev = [None] * len(parts)
         self.count = [0] * len(parts)
         self.norms = [[] for _ in parts]
+        self.peak = [0.0] * len(parts)
 
     def flipped(self) -> bool:
         hit = False
@@ -53,7 +54,11 @@ class OscillationWatch:
             cur = self.v[part] if part is not None else self.v.copy()
             prev = self.prev[i]
             nv = float(np.linalg.norm(cur))
-            alternating = prev is not None and nv > 0 and float(cur @ prev) < -0.5 * nv * np.linalg.norm(prev)
+            self.peak[i] = max(self.peak[i], nv)
+            # velocities at round-off level (a run at rest) carry no sign information
+            significant = nv > self.noise * self.peak[i]
+            alternating = (prev is not None and significant
+                           and float(cur @ prev) < -0.5 * nv * np.linalg.norm(prev))
             self.count[i] = self.count[i] + 1 if alternating else 0
             self.norms[i] = (self.norms[i] + [nv])[-(self.window + 1):]
             self.prev[i] = cur
@@ -61,14 +66,46 @@ class OscillationWatch:
         return hit
 
 
+class ChatterWatch:
+    """Detects contact chatter: contact nodes switching between penetration and separation every few steps.
+
+    The explicit scheme's unstable contact mode need not alternate every step:
+    a penetrating node is kicked far out, pulled back over a few steps,
+    penetrates again. A resolved run switches a node's contact state only when
+    the load drives it; ``max_switches`` switches within ``window`` steps (a
+    period of 5 steps or less) means the step cannot be trusted.
+    """
+
+    def __init__(self, u_nu, window: int = 20, max_switches: int = 8, significant: float = 1e-2):
+        self.u_nu, self.window, self.max_switches = u_nu, window, max_switches
+        self.significant = significant
+        self.history = []
+        self.prev = None
+
+    def chattering(self) -> bool:
+        u = self.u_nu()
+        # a switch counts only where the node is clearly on either side: a node hovering at u_nu ~ 0
+        # (near the clamp, or a decaying oscillation of a stable step) is not chatter
+        big = np.abs(u) > self.significant * (np.abs(u).max() + 1e-300)
+        state = np.where(big, np.sign(u), 0.0)
+        if self.prev is not None:
+            self.history.append((state * self.prev) < 0)
+            self.history = self.history[-self.window:]
+        self.prev = np.where(state != 0, state, self.prev if self.prev is not None else 0.0)
+        if len(self.history) < self.window:
+            return False
+        return bool(np.max(np.sum(self.history, axis=0)) >= self.max_switches)
+
+
 def march(disc, scheme, times, recorder, *, progress=None, limit=None):
     """Advance ``scheme`` over ``times``, recording as ``recorder`` asks.
 
     Stops with :class:`Diverged` at the first step whose displacement is not
     finite or exceeds ``limit`` anywhere (the state is then meaningless for a
-    small-strain model), or whose velocity has alternated in sign for 12 steps
-    without decaying (:class:`OscillationWatch`); the recorder keeps what was
-    computed before.
+    small-strain model), whose velocity has alternated in sign for 12 steps
+    without decaying (:class:`OscillationWatch`), or (schemes that ask for it:
+    the explicit one) whose contact nodes chatter (:class:`ChatterWatch`); the
+    recorder keeps what was computed before.
     """
     from tqdm.auto import tqdm
 
@@ -82,6 +119,7 @@ def march(disc, scheme, times, recorder, *, progress=None, limit=None):
     n_steps = len(times) - 1
     normal = disc.node_dofs[:, -1] if disc.dim > 1 else None
     watch = OscillationWatch(disc.v.vec.FV().NumPy(), [None] + ([normal] if normal is not None else []))
+    chatter = ChatterWatch(lambda: disc.normal_displacement(u_np)) if getattr(scheme, "watch_chatter", False) else None
     bar = tqdm(total=n_steps, disable=None if progress is None else not progress, unit="step",
                mininterval=0.5, leave=False, desc=disc.scene.name)
     try:
@@ -89,12 +127,17 @@ def march(disc, scheme, times, recorder, *, progress=None, limit=None):
             scheme.step(times[n - 1], times[n])
             norm = float(np.abs(u_np).max())
             oscillating = watch.flipped()
-            if not math.isfinite(norm) or norm > bound or oscillating:
+            chattering = chatter is not None and chatter.chattering()
+            if not math.isfinite(norm) or norm > bound or oscillating or chattering:
                 if not math.isfinite(norm):
                     what = "non-finite values"
                 elif oscillating:
                     what = (f"a sign-alternating oscillation of the velocity, not decaying over {watch.window} steps "
                             "(the scheme is unstable at this step size)")
+                elif chattering:
+                    what = (f"contact chatter: a contact node switched between penetration and separation "
+                            f"{chatter.max_switches} or more times within {chatter.window} steps (the explicit "
+                            "scheme is unstable at this step size, or the step is far too long for the load)")
                 else:
                     what = f"a displacement of {norm:.3g} m, beyond the bound {limit:.3g} m (10 x the body)"
                 raise Diverged(f"{disc.scene.name}: {what} at step {n} (t = {times[n]:.6g} s) "
