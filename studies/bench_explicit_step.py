@@ -5,8 +5,9 @@ Run:  python studies/bench_explicit_step.py [--sizes 220 440 900] [--steps 40]
 For each mesh (nx x nx/10 cells, P1) it times, in one process and interleaved,
 (a) a back-substitution with the factored viscous matrix (the floor) and
 (b) a whole step of the paper's scheme (load, elastic matvec, contact and
-bonding forms, solve, update), and reports medians and their ratio. It also
-times 1000 steps at nx = 80, 160, 320 for comparison with other codes.
+bonding forms, solve, update), and reports medians and their ratio, with and
+without NGSolve's TaskManager. It also times 1000 steps at nx = 80, 160, 320 for
+comparison with other codes, and the five paper problems at the paper's resolution.
 """
 from __future__ import annotations
 
@@ -58,6 +59,16 @@ def thousand_steps(nx):
                 setup_s=ds.attrs["setup_time"])
 
 
+def paper_problems():
+    """Wall time of tp1 ... tp5 at the paper's resolution (rod h = k = 0.01; slab presets), run one after another."""
+    out = {}
+    for name in ("tp1", "tp2", "tp3", "tp4", "tp5"):
+        a = time.perf_counter()
+        workbench.run(name, progress=False)
+        out[name] = time.perf_counter() - a
+    return out
+
+
 def main():
     ap = argparse.ArgumentParser()
     ap.add_argument("--sizes", type=int, nargs="*", default=[220, 440, 900])
@@ -78,6 +89,10 @@ def main():
         r = thousand_steps(nx)
         rows.append(r)
         print(f"1000 steps, nx={nx:4d} ndof={r['ndof']:6d}: {r['wall_s']:.2f} s (+ setup {r['setup_s']:.2f} s)", flush=True)
+    times = paper_problems()
+    print("paper problems at the paper's resolution: " + ", ".join(f"{k} {v:.2f} s" for k, v in times.items())
+          + f"; total {sum(times.values()):.2f} s", flush=True)
+    rows.append(times)
     print(json.dumps(rows))
 
 

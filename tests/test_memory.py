@@ -107,6 +107,7 @@ def test_memory_slab_coupled_refinement():
     (dict(kernel="exp(-x)"), "unknown name 'x'"), (dict(prony="(100, 0.3, 0)"), "tau_i > 0"),
     (dict(prony="(100, 0.3, -1)"), "tau_i > 0"), (dict(kernel="exp(-t)", kernel_E=5.0), "not both"),
     (dict(scheme="explicit"), "does not apply to a Model B scene"), (dict(prony="(100, 0.3)"), "(E_i, nu_i, tau_i)"),
+    (dict(order=2), "order must be 1"),
 ])
 def test_bad_model_b_input(overrides, message):
     with pytest.raises(ParameterError) as err:

@@ -240,8 +240,6 @@ def build_memory(scene) -> Discretisation:
     """
     from .physics import memory
 
-    if scene["order"] != 1:
-        raise ValueError(f"order = {scene['order']}: Model B constrains the contact vertices, so order must be 1")
     mesh = meshes.build(scene)
     dim = scene.dim
     fes = _vector_space(scene, mesh, 1)

@@ -274,6 +274,9 @@ def _check_consistency(name, geometry, v, model="A"):
                              f"allowed: {' | '.join(repr(s) for s in MODEL_SCHEMES[model])}")
     if model == "B":
         _check_memory(geometry, v)
+        if v["order"] != 1:
+            raise ParameterError(f"order = {v['order']}: Model B constrains the contact vertices (K_h), so order must "
+                                 "be 1")
     if v["k"] > v["T"]:
         raise ParameterError(f"k = {v['k']:g} is larger than T = {v['T']:g}; allowed: 0 < k <= T")
     ext = _extent(geometry, v)
