@@ -196,13 +196,8 @@ def build(scene) -> Discretisation:
     viscous.Assemble()
     elastic.Assemble()
 
-    t = ngs.Parameter(0.0)
-    u, v = ngs.GridFunction(fes, "u"), ngs.GridFunction(fes, "velocity")
-    if dim == 1:
-        u.Set(scene["u0"].cf())
-    contact_name = BOUNDARIES[scene.geometry]["contact"]
-    d = Discretisation(scene, mesh, fes, t, u, v, viscous, elastic, contact_name)
-    _index_arrays(d)
+    d = _new(scene, mesh, fes, viscous, elastic)
+    u, contact_name = d.u, d.contact_name
     terms = scene.terms
     if "adhesion" in terms:
         _add_bonding(d)
@@ -210,6 +205,17 @@ def build(scene) -> Discretisation:
     if integrand is not None:
         d.contact_form = ngs.LinearForm(fes)
         d.contact_form += integrand.Compile() * ngs.ds(contact_name)
+    return d
+
+
+def _new(scene, mesh, fes, viscous, elastic) -> Discretisation:
+    """The state (u at u0, v = 0), time parameter and index arrays around the assembled matrices."""
+    u, v = ngs.GridFunction(fes, "u"), ngs.GridFunction(fes, "velocity")
+    if scene.dim == 1:
+        u.Set(scene["u0"].cf())
+    d = Discretisation(scene, mesh, fes, ngs.Parameter(0.0), u, v, viscous, elastic,
+                       BOUNDARIES[scene.geometry]["contact"])
+    _index_arrays(d)
     return d
 
 
@@ -253,14 +259,8 @@ def build_memory(scene) -> Discretisation:
 
     A = kelvin_voigt.scalar(scene["a"]) if dim == 1 else \
         memory.tensor_of(scene["E"], scene["nu"], dim)
-    elastic = stiffness(A)
-    t = ngs.Parameter(0.0)
-    u, v = ngs.GridFunction(fes, "u"), ngs.GridFunction(fes, "velocity")
-    if dim == 1:
-        u.Set(scene["u0"].cf())
-    contact_name = BOUNDARIES[scene.geometry]["contact"]
-    d = Discretisation(scene, mesh, fes, t, u, v, None, elastic, contact_name)
-    _index_arrays(d)
+    d = _new(scene, mesh, fes, None, stiffness(A))
+    contact_name = d.contact_name
     d.memory_kind = "prony" if scene["prony"] else ("kernel" if "memory" in scene.terms else "none")
     if d.memory_kind == "prony":
         d.memory = [(stiffness(C), C, tau) for C, tau in memory.prony_tensors(scene)]

@@ -42,6 +42,8 @@ import matplotlib.pyplot as plt  # noqa: E402
 import numpy as np  # noqa: E402
 from matplotlib.tri import Triangulation  # noqa: E402
 
+from .plotting import _save  # noqa: E402 - one way to write a figure
+
 #: Paper figure numbers of each problem's figure kinds (used in titles and by :func:`paper_figures`).
 FIGURE_NUMBERS = {
     "tp1": {"displacement": 2, "evolution": 3, "bonding": 4},
@@ -52,14 +54,6 @@ FIGURE_NUMBERS = {
 }
 ROD_KINDS = ("displacement", "evolution", "bonding")
 SLAB_KINDS = ("deformed_mesh", "von_mises", "contact_displacement", "bonding")
-
-
-def _save(fig, path):
-    if path is not None:
-        Path(path).parent.mkdir(parents=True, exist_ok=True)
-        fig.savefig(path, dpi=150, bbox_inches="tight")
-        plt.close(fig)
-    return fig
 
 
 def _title(ds, kind, text):
