@@ -113,3 +113,12 @@ def test_bad_model_b_input(overrides, message):
     with pytest.raises(ParameterError) as err:
         workbench.run("memory_slab", progress=False, **overrides)
     assert message in str(err.value)
+
+
+def test_block_3d_regimes():
+    """memory_block (3D, coarse): all contact regimes at T, u_nu <= gap, complementarity at round-off."""
+    ds = workbench.run("memory_block", h=0.125, k=0.05, progress=False)
+    last = ds.isel(time=-1)
+    assert all(int(last[n]) > 0 for n in ("n_separated", "n_compliant", "n_rigid"))
+    assert float((-ds.u_contact.sel(component="z")).max()) <= ds.attrs["gap"] * (1 + 1e-12)
+    assert float(ds.complementarity.max()) <= 1e-10
