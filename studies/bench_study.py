@@ -2,7 +2,7 @@
 
 Run:  python studies/bench_study.py
 
-The sweep: tp5 (P1, explicit), h = 0.1 ... 0.00625, k = 0.2 h (below k_crit ~ 0.03), T = 1,
+The sweep: tp5 (P1, explicit), h = 0.05 ... 0.003125 (ny = 2 ... 32), k = 0.2 h (below k_crit ~ 0.03), T = 1,
 reference = the finest level. Measured in one process, one after another:
 (a) the five runs as a plain loop of ``workbench.run`` (the floor),
 (b) the same as a Study in this process (workers=0: archiving + error evaluation),
@@ -18,7 +18,7 @@ import time
 import workbench
 from workbench.study import Study
 
-LEVELS = [0.1, 0.05, 0.025, 0.0125, 0.00625]
+LEVELS = [0.05, 0.025, 0.0125, 0.00625, 0.003125]
 C = 0.2
 
 
