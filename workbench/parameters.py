@@ -202,7 +202,8 @@ PARAMETERS: dict[str, Param] = {p.name: p for p in [
     _p("adhesion", True, "", "bonding field beta and adhesive tractions are modelled", "flag"),
     _p("c_nu", 1.0, "Pa/m^m", "normal compliance stiffness: p_nu(r) = c_nu ((r - gap)_+)^m_nu", **_NONNEG),
     _p("m_nu", 1.0, "1", "normal compliance exponent", lower=1.0),
-    _p("gap", 0.0, "m", "initial gap between the contact surface and the foundation", **_NONNEG),
+    _p("gap", 0.0, "m", "g: Model A, the initial gap to the foundation; Model B, the thickness of the compliant "
+       "layer over the rigid foundation (u_nu <= g)", **_NONNEG),
     _p("gamma_nu", 0.3, "Pa/m", "adhesion coefficient", **_NONNEG),
     _p("eps_a", 0.0, "J/m^2", "limit bond energy (below it nothing debonds)", **_NONNEG),
     _p("L", 0.3, "m", "characteristic bond length (truncation R)", **_POS),
