@@ -176,7 +176,7 @@ class ImplicitEuler:
             slope0 = float(g @ d)  # < 0: d descends
             f_new = self.op.force(u_C + d)
             slope1 = float((S0_inv @ (u_C + d - z_C) + f_new) @ d)
-            if slope1 <= 1e-10 * abs(slope0):
+            if slope1 <= 1e-3 * abs(slope0):  # no real overshoot (0 up to round-off once the branches are right)
                 u_C += d
                 f = f_new
             else:
@@ -189,15 +189,16 @@ class ImplicitEuler:
                            f"at t = {time:.6g} s (residual {g_norm:.3g}); try a smaller k", time=time)
 
     def _line_search(self, u_C, d, z_C, slope0, slope1, steps=80):
-        """Root of phi'(a) = g(u_C + a d) . d on (0, 1): Illinois regula falsi (phi' non-decreasing,
-        piecewise linear, kinks where a contact term changes branch)."""
+        """A step a in (0, 1) with -|phi'(0)| / 2 <= phi'(a) <= 0 (so the energy decreases and a is near
+        the minimum along d): Illinois regula falsi on phi'(a) = g(u_C + a d) . d, which is
+        non-decreasing and piecewise linear (kinks where a contact term changes branch)."""
         S0_inv = self.condensed.S0_inv
         a_lo, s_lo, a_hi, s_hi = 0.0, slope0, 1.0, slope1
         a, side = 1.0, 0
         for _ in range(steps):
             a = a_lo - s_lo * (a_hi - a_lo) / (s_hi - s_lo)
             s_a = float((S0_inv @ (u_C + a * d - z_C) + self.op.force(u_C + a * d)) @ d)
-            if abs(s_a) <= 1e-12 * abs(slope0):
+            if 0.5 * slope0 <= s_a <= 0.0:
                 break
             if s_a < 0:
                 a_lo, s_lo = a, s_a
