@@ -86,7 +86,8 @@ def main():
     out = Path(args.out)
     ds = sweep(out, args.quick)
     workbench.write(ds, out / "speed_accuracy.nc")
-    plotting.pareto(ds, out / "speed_accuracy_pareto.png")
+    plotting.pareto(ds, out / "speed_accuracy_pareto.png", error="rel_error_tip")
+    plotting.pareto(ds, out / "speed_accuracy_pareto_beta.png", error="rel_error_beta")
     for quantity in ("rel_error_tip", "rel_error_beta"):
         for tol in (0.1, 0.01, 0.001):
             best = cheapest(ds, tol, error=quantity)

@@ -97,17 +97,20 @@ def pareto(study_ds, path=None, error="error", cost="wall_time"):
     """Error against cost (wall time incl. setup) of every case, the Pareto front joined."""
     err = study_ds[error].values.ravel()
     c = (study_ds[cost] + (study_ds["setup_time"] if cost == "wall_time" else 0)).values.ravel()
-    front = study_ds["pareto"].values.ravel().astype(bool) if error == "error" else np.zeros_like(err, bool)
+    ok = np.isfinite(err) & np.isfinite(c)
+    front = np.array([ok[i] and not np.any(ok & (err <= err[i]) & (c <= c[i]) & ((err < err[i]) | (c < c[i])))
+                      for i in range(err.size)])
     fig, ax = plt.subplots(figsize=(5, 3.8), constrained_layout=True)
     stacked = study_ds[error].stack(case=study_ds[error].dims)
     labels = [", ".join(f"{d}={v}" for d, v in zip(stacked.indexes["case"].names, idx)) for idx in stacked.indexes["case"]]
-    ok = np.isfinite(err) & np.isfinite(c)
     ax.loglog(c[ok], err[ok], "o", color="tab:blue", alpha=0.6)
     order = np.argsort(c[front & ok])
     ax.loglog(c[front & ok][order], err[front & ok][order], "-", color="tab:red", label="Pareto front")
     for ci, ei, lab, f in zip(c, err, labels, front):
         if f and np.isfinite(ci) and np.isfinite(ei):
             ax.annotate(lab, (ci, ei), fontsize=6)
-    ax.set(xlabel=f"{cost} [s]", ylabel=error, title=f"{study_ds.attrs.get('scene')}: accuracy vs cost")
+    label = study_ds[error].attrs.get("long_name", error)
+    ax.set(xlabel=f"{cost} + setup [s]", ylabel=error, title=f"{study_ds.attrs.get('scene')}: accuracy vs cost")
+    ax.text(0.02, 0.02, label, transform=ax.transAxes, fontsize=6)
     ax.legend(fontsize=7)
     return _save(fig, path)
