@@ -1,5 +1,4 @@
 """The exploration notebooks (jupytext percent-format .py files in studies/notebooks) run at small size."""
-import os
 import runpy
 from pathlib import Path
 

@@ -214,7 +214,7 @@ class Study:
             bar.close()
         executed = time.perf_counter() - t0
         runs = {c: results.load(paths[c]) for c in todo}
-        self.dataset = self._evaluate(runs, record, compare, executed, len(missing))
+        self.dataset = self._evaluate(runs, compare, executed, len(missing))
         self.overhead["evaluate"] = time.perf_counter() - t0 - executed
         return self.dataset
 
@@ -256,7 +256,7 @@ class Study:
             return ("solution", rod_ode(self.scene))
         return ("solution", spec)
 
-    def _errors(self, case, ds, ref, compare, record):
+    def _errors(self, case, ds, ref, compare):
         """Error measures of one case against the reference."""
         kind, R = ref
         out = {}
@@ -312,7 +312,7 @@ class Study:
             out["error_beta_end"] = float(np.max(np.abs(_far_beta(ds).values - ref_end)))
         return out
 
-    def _evaluate(self, runs, record, compare, elapsed, n_new):
+    def _evaluate(self, runs, compare, elapsed, n_new):
         ref = self._reference(runs)
         listed = [c for c in self.cases if c != self.ref_case or not isinstance(self.reference_spec, str)
                   or self.reference_spec != "finest"]
@@ -348,7 +348,7 @@ class Study:
             complete[i] = a["status"] == "complete"
             if c not in listed:
                 continue
-            err = self._errors(c, ds, ref, compare, record)
+            err = self._errors(c, ds, ref, compare)
             for n in ("error", "error_V", "error_Q", "error_beta", "error_beta_end"):
                 if n in err:
                     arrays[n][i] = err[n]

@@ -20,7 +20,6 @@
 # %%
 import os
 
-import workbench
 from workbench import plotting
 from workbench.study import Study
 
