@@ -140,7 +140,7 @@ def cmd_study(args) -> int:
         print(f"wrote {args.output} (cases in {archive}/)")
     for norm in ("error", "error_V", "error_Q", "error_beta", "error_beta_end"):
         rates = ds.observed_order.sel(norm=norm)
-        found = {a: np.round(rates.sel(along=a).values.ravel(), 3).tolist() for a in rates.along.values
+        found = {str(a): np.round(rates.sel(along=a).values.ravel(), 3).tolist() for a in rates.along.values
                  if np.isfinite(rates.sel(along=a).values).any()}
         if found:
             print(f"observed order of {norm}: {found}")
