@@ -53,6 +53,7 @@ class MemoryVI:
         self.rhs = d.u.vec.CreateVector()
         self.rhs_np = self.rhs.FV().NumPy()
         self.tmp = d.u.vec.CreateVector()
+        self.work = d.u.vec.CreateVector()  # matvec results (allocated once, not per step)
         self.lift = d.dim == 1 and not sc["delta"].is_zero()
         self.u_prev = d.u.vec.FV().NumPy().copy()
         # memory: Prony histories H_i (dof vectors) or the stored u_j for a general kernel
@@ -93,9 +94,8 @@ class MemoryVI:
 
     def _add_matvec(self, K, H, out_np):
         self.tmp.FV().NumPy()[:] = H
-        work = self.rhs.CreateVector()
-        work.data = K.mat * self.tmp
-        out_np += work.FV().NumPy()
+        self.work.data = K.mat * self.tmp
+        out_np += self.work.FV().NumPy()
 
     def step(self, t_prev: float, t_next: float) -> None:
         d = self.d
@@ -110,9 +110,8 @@ class MemoryVI:
         if self.lift:  # u = delta(t_n) at x = 0
             self.tmp.FV().NumPy()[:] = 0.0
             self.tmp.FV().NumPy()[d.dirichlet_dofs] = d.dirichlet_value(t_next)
-            work = self.rhs.CreateVector()
-            work.data = d.elastic.mat * self.tmp
-            self.rhs_np -= work.FV().NumPy()
+            self.work.data = d.elastic.mat * self.tmp
+            self.rhs_np -= self.work.FV().NumPy()
         self.solver.solve(self.rhs_np, self.z)
         if self.lift:
             self.z[d.dirichlet_dofs] = d.dirichlet_value(t_next)
