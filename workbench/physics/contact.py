@@ -40,8 +40,9 @@ def truncate_vector(v, L: float):
 
 def normal_compliance(u_nu, c_nu: float, m_nu: float = 1.0, gap: float = 0.0):
     """p_nu(u_nu - g) = c_nu ((u_nu - g)_+)^m_nu: the foundation's push against penetration."""
-    r = positive_part(u_nu - gap)
-    return c_nu * (r if m_nu == 1 else r**m_nu)
+    s = u_nu - gap
+    # the power sits inside the branch: d/ds (s_+)**m linearises to NaN wherever s <= 0
+    return c_nu * (positive_part(s) if m_nu == 1 else ngs.IfPos(s, s**m_nu, 0))
 
 
 def adhesive_pull(u_nu, beta, gamma_nu: float, L: float):

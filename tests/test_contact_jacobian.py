@@ -1,0 +1,94 @@
+"""The implicit schemes' contact linearisation, and normal compliance with exponents m_nu != 1.
+
+The condensed semismooth Newton (workbench.condensation) needs f(u_C) = j(beta, u, .)|_C and its
+Jacobian df/du_C, which NGSolve derives from the IfPos integrand (AssembleLinearization). The
+Jacobian is checked here against central finite differences of f itself (as NGSolve's own
+tests/pytest/test_contact.py checks AssembleLinearization against Apply), at random states whose
+quadrature points are, almost surely, away from the kinks of (.)_+, R and R*.
+
+p_nu(r) = c_nu (r_+)^m_nu: the implicit scheme is checked for m_nu = 1.5, 2, 3 against the reduced
+rod ODE (SPEC, Appendix A; scipy Radau, independent of the schemes) and against the explicit scheme
+at a small step on the slab.
+"""
+import numpy as np
+import pytest
+
+import workbench
+from workbench import discretisation, references
+from workbench.condensation import ContactOperator
+
+
+def random_state(op, d, rng, scale):
+    """Contact dofs spread over both sides of the kinks; beta random in (0.2, 1)."""
+    u_C = rng.uniform(-scale, scale, op.size)
+    if d.beta is not None:
+        b = d.beta.vec.FV().NumPy()
+        b[d.beta_dofs] = rng.uniform(0.2, 1.0, d.beta_dofs.size)
+    return u_C
+
+
+@pytest.mark.parametrize("name, overrides", [
+    ("slab", dict(h=0.1, ny=1, c_nu=7.0, m_nu=1.0, gamma_nu=2.0, L=0.3, c_tau=3.0, gap=0.05)),
+    ("slab", dict(h=0.1, ny=1, c_nu=7.0, m_nu=1.5, gamma_nu=2.0, L=0.3, c_tau=3.0)),
+    ("slab", dict(h=0.1, ny=1, order=2, c_nu=7.0, m_nu=2.0, gamma_nu=2.0, L=0.3, c_tau=3.0, bonding_truncation="symmetric")),
+    ("slab", dict(h=0.1, ny=1, c_nu=7.0, m_nu=3.0, adhesion=False)),
+    ("block", dict(h=0.25, c_nu=7.0, m_nu=2.0, gamma_nu=2.0, L=0.3, c_tau=3.0)),
+    ("rod", dict(h=0.25, c_nu=7.0, m_nu=1.5, gamma_nu=2.0, L=0.3)),
+])
+def test_contact_jacobian_equals_finite_differences(name, overrides):
+    sc = workbench.scene(name, **overrides)
+    d = discretisation.build(sc)
+    op = ContactOperator(d)
+    rng = np.random.default_rng(3)
+    eps = 1e-7
+    largest = 0.0
+    for _ in range(4):
+        u_C = random_state(op, d, rng, scale=0.5)
+        J = op.jacobian(u_C)
+        assert np.isfinite(J).all()
+        fd = np.empty_like(J)
+        for j in range(op.size):
+            e = np.zeros(op.size)
+            e[j] = eps
+            fd[:, j] = (op.force(u_C + e) - op.force(u_C - e)) / (2 * eps)
+        scale = max(np.abs(fd).max(), 1e-3)
+        np.testing.assert_allclose(J, fd, rtol=0, atol=1e-6 * scale)
+        largest = max(largest, np.abs(fd).max())
+    assert largest > 1e-2  # the states exercise the terms
+
+
+ROD_PUSHED = dict(h=0.1, T=1.0, c_nu=5.0, gamma_nu=0.3, L=0.3, delta="0.2*sin(pi*t)", u0="0")
+
+
+@pytest.mark.parametrize("m", [1.5, 2.0, 3.0])
+def test_implicit_rod_with_power_compliance_matches_ode(m):
+    """Rod pressed into the foundation (delta = 0.2 sin(pi t)): implicit backward Euler is O(k) against
+    the reduced ODE with p_nu(r) = 5 r_+^m; the explicit scheme at the same k agrees as closely."""
+    sc = workbench.scene("rod", m_nu=m, **ROD_PUSHED)
+    ref = references.rod_ode(sc)
+    errors = {}
+    for scheme in ("implicit", "explicit"):
+        for k in (0.01, 0.005):
+            ds = workbench.run(sc, k=k, scheme=scheme, progress=False)
+            u_end = ds.u_probe.sel(component="x").isel(probe=-1).values
+            errors[scheme, k] = float(np.max(np.abs(u_end - ref(ds.time.values, x=1.0)[0])))
+    assert max(errors.values()) > 1e-6  # the comparison is not with itself
+    for scheme in ("implicit", "explicit"):
+        assert errors[scheme, 0.005] < 2e-3
+        assert 1.7 < errors[scheme, 0.01] / errors[scheme, 0.005] < 2.3  # first order
+    # the end really penetrates, so the power law acts
+    assert float(ref(np.array([0.5]), x=1.0)[0][0]) > 0.05
+
+
+@pytest.mark.parametrize("m", [1.5, 2.0, 3.0])
+def test_implicit_slab_with_power_compliance_matches_explicit(m):
+    """Slab pressed down: implicit at k = 2e-3 against the explicit scheme at k = 2.5e-4 (a different
+    scheme, well inside its stability limit): the tip and the contact side agree to the O(k) error."""
+    common = dict(h=0.05, T=0.3, c_nu=50.0, m_nu=m, traction_top="(0, -2*t)", gamma_nu=0.3)
+    imp = workbench.run("slab", k=2e-3, scheme="implicit", progress=False, **common)
+    exp = workbench.run("slab", k=2.5e-4, scheme="explicit", progress=False, **common)
+    a = imp.u_contact.sel(component="y").isel(time=-1).values
+    b = exp.u_contact.sel(component="y").isel(time=-1).values
+    assert np.max(-b) > 1e-3  # penetration: the compliance acts
+    assert np.max(np.abs(a - b)) < 0.02 * np.max(np.abs(b))
+    assert imp.newton_iterations.max() <= 10
