@@ -122,3 +122,104 @@ def test_block_3d_regimes():
     assert all(int(last[n]) > 0 for n in ("n_separated", "n_compliant", "n_rigid"))
     assert float((-ds.u_contact.sel(component="z")).max()) <= ds.attrs["gap"] * (1 + 1e-12)
     assert float(ds.complementarity.max()) <= 1e-10
+
+
+LOADED_ROD = dict(ROD, delta=lambda t: 0.3 + 0.1 * np.sin(2 * np.pi * t))
+
+
+def test_rod_loaded_at_t0_against_volterra(order_of):
+    """delta(0) = 0.3 > gap = 0.1: at t = 0 the end already sits on the rigid limit. u(0) is the solution of the
+    inclusion at t = 0 (no memory yet), recorded with its state; the whole history converges at first order in k
+    to the independent Volterra solution of the same data."""
+    ref = volterra.solve_prony(**LOADED_ROD)
+    assert int(ref.state(np.array([0.0]))[0]) == volterra.RIGID
+    errs, ks = [], [0.02, 0.01, 0.005]
+    for k in ks:
+        ds = workbench.run("memory_rod", k=k, delta="0.3 + 0.1*sin(2*pi*t)", progress=False)
+        first = ds.isel(time=0)
+        assert float(first.time) == 0.0
+        assert int(first.contact_state.values[0]) == volterra.RIGID and int(first.n_rigid) == 1
+        assert float(first.u_contact.values[0, 0]) == pytest.approx(float(ref.w(np.array([0.0]))[0]), abs=1e-14)
+        assert float(first.contact_pressure.values[0]) == pytest.approx(-float(ref.sigma(np.array([0.0]))[0]),
+                                                                         rel=1e-12)
+        assert float(first.complementarity) <= 1e-14
+        t = ds.time.values
+        errs.append(np.abs(ds.u_contact.values[:, 0, 0] - ref.w(t)).max())
+    assert errs[-1] > 1e-7 and order_of(ks, errs) >= 0.9 and errs[-1] < 1e-3
+
+
+def test_slab_loaded_at_t0_against_independent_qp():
+    """memory_slab with the load already on at t = 0: u(0) minimises the static energy
+    1/2 u.K u - f.u + sum_i w_i psi(s_i) subject to s_i = -u_y <= gap at the contact vertices.
+    Reference: that program over all dofs, assembled here independently of workbench (plane-stress
+    stiffness, traction and nodal weights from NGSolve forms) and solved by SciPy's L-BFGS-B with
+    s_i = p_i - q_i, 0 <= p_i <= gap, q_i >= 0 (psi(s) = F s_+ + c/2 s_+^2 becomes the smooth
+    F p + c/2 p^2: at the minimum p_i q_i = 0, since lowering both lowers psi and keeps s)."""
+    from scipy.optimize import minimize
+
+    load = "(0, -60*(0.5 + t)*ifpos(x - 1, 1, -0.25))"
+    ds = workbench.run("memory_slab", h=0.25, k=0.25, traction_top=load, snapshots="0", progress=False)
+    mesh = ngs.Mesh(ngs.meshes.MakeStructured2DMesh(quads=False, nx=8, ny=4, mapping=lambda x, y: (2 * x, y)).ngmesh)
+    fes = ngs.VectorH1(mesh, order=1, dirichlet="left")
+    u, w = fes.TnT()
+    E, nu, F, c, g = 1000.0, 0.3, ds.attrs["F"], ds.attrs["c"], ds.attrs["gap"]
+    eps = lambda f: 0.5 * (ngs.Grad(f) + ngs.Grad(f).trans)  # noqa: E731
+    sigma = lambda e: E / (1 - nu ** 2) * ((1 - nu) * e + nu * ngs.Trace(e) * ngs.Id(2))  # noqa: E731
+    K = ngs.BilinearForm(ngs.InnerProduct(sigma(eps(u)), eps(w)) * ngs.dx).Assemble()
+    traction = -30.0 * ngs.IfPos(ngs.x - 1, 1, -0.25)
+    f = ngs.LinearForm(traction * w[1] * ngs.ds("top")).Assemble()
+    p1 = ngs.H1(mesh, order=1)
+    weights = ngs.LinearForm(p1.TestFunction() * ngs.ds("bottom")).Assemble().vec.FV().NumPy()
+    rows, cols, vals = K.mat.COO()
+    Kd = np.zeros((fes.ndof, fes.ndof))
+    np.add.at(Kd, (np.asarray(rows), np.asarray(cols)), np.asarray(vals))
+    nv = mesh.nv
+    xy = np.array(mesh.ngmesh.Coordinates())
+    free = np.array(fes.FreeDofs(), dtype=bool)
+    contact = [i for i in range(nv) if abs(xy[i, 1]) < 1e-12 and free[i]]
+    y_dof = np.array([nv + i for i in contact])  # VectorH1 P1: x-components first, then y
+    others = np.array([d for d in np.nonzero(free)[0] if d not in set(y_dof)])
+    fv, wc = f.vec.FV().NumPy(), weights[contact]
+    n, m = others.size, len(contact)
+
+    def full(z):
+        x = np.zeros(fes.ndof)
+        x[others] = z[:n]
+        x[y_dof] = -(z[n:n + m] - z[n + m:])  # u_y = -s, s = p - q
+        return x
+
+    def energy_and_grad(z):
+        x = full(z)
+        r = Kd @ x - fv
+        p = z[n:n + m]
+        val = 0.5 * x @ (Kd @ x) - fv @ x + wc @ (F * p + 0.5 * c * p * p)
+        gp = -r[y_dof] + wc * (F + c * p)
+        return val / E, np.concatenate([r[others], gp, r[y_dof]]) / E
+
+    bounds = [(None, None)] * n + [(0.0, g)] * m + [(0.0, None)] * m
+    res = minimize(energy_and_grad, np.zeros(n + 2 * m), jac=True, bounds=bounds, method="L-BFGS-B",
+                   options=dict(maxiter=100000, maxfun=100000, ftol=1e-16, gtol=1e-13, maxcor=60))
+    u_ref = full(res.x)
+    u0 = ds.u_dofs.isel(snapshot=0).values if float(ds.snapshot_time[0]) == 0.0 else None
+    first = ds.isel(time=0)
+    s_ref = -u_ref[y_dof]
+    got = -first.u_contact.sel(component="y").values
+    order = np.argsort(ds.node_x.values)
+    got_by_x = dict(zip(np.round(ds.node_x.values, 12), got))
+    s_got = np.array([got_by_x[round(xy[i, 0], 12)] for i in contact])
+    assert np.abs(s_ref).max() > 0.2 * g  # the load at t = 0 really presses the body in
+    np.testing.assert_allclose(s_got, s_ref, rtol=0, atol=1e-6 * g)
+    states = first.contact_state.values[order]
+    assert (states > 0).any() and int(first.n_separated) < len(contact)
+    assert u0 is None or np.abs(u0 - u_ref).max() <= 1e-6 * np.abs(u_ref).max()
+
+
+@pytest.mark.parametrize("memory", [dict(), dict(prony=(), kernel="exp(-t/0.2)", kernel_E=0.5)],
+                         ids=["prony", "general kernel"])
+def test_rod_study_against_volterra_reference(memory):
+    """`workbench study memory_rod --reference ode`: the reference of a Model B rod is the Volterra solver
+    (Prony: ODE; general kernel: Richardson-extrapolated product trapezoid rule), order 1 in k."""
+    st = Study("memory_rod", k=[0.02, 0.01, 0.005], reference="ode", workers=0, **memory)
+    ds = st.run(progress=False)
+    st.assert_order(1.0, tol=0.1, along="k", max_error=2e-3)
+    assert "beta" not in ds and np.isfinite(ds.error_probe.values).all()

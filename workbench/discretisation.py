@@ -211,7 +211,7 @@ def build(scene) -> Discretisation:
 def _new(scene, mesh, fes, viscous, elastic) -> Discretisation:
     """The state (u at u0, v = 0), time parameter and index arrays around the assembled matrices."""
     u, v = ngs.GridFunction(fes, "u"), ngs.GridFunction(fes, "velocity")
-    if scene.dim == 1:
+    if "u0" in scene.values:  # Model A's initial condition (Model B solves for u(0))
         u.Set(scene["u0"].cf())
     d = Discretisation(scene, mesh, fes, ngs.Parameter(0.0), u, v, viscous, elastic,
                        BOUNDARIES[scene.geometry]["contact"])

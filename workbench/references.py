@@ -4,6 +4,10 @@
 * :func:`rod_ode` — any rod scene with u0 = delta(0) reduces to an ODE for the
   end strain A(t) and beta(t) (SPEC, Appendix A of the paper), integrated here
   with SciPy's Radau method to tight tolerance.
+* :func:`rod_memory` — a Model B rod scene: the scalar Volterra inclusion solved by
+  :mod:`workbench.volterra` (Prony kernels: an ODE for the memory variables; a general
+  kernel: the product trapezoid rule on a fine grid, Richardson-extrapolated).
+* :func:`rod_reference` — whichever of the two fits the scene's model.
 * :func:`modal_linear` — the exact-in-time solution of the semi-discrete linear
   Kelvin–Voigt system K_A u' + K_G u = t F1 (no contact), by the generalised
   eigen-decomposition K_G phi = lambda K_A phi; isolates a scheme's time error.
@@ -28,8 +32,9 @@ class RodSolution:
     ``stress(t)`` is sigma = a A + b A'.
     """
 
-    def __init__(self, delta, strain, strain_rate, beta, a=1.0, b=1.0):
+    def __init__(self, delta, strain, strain_rate, beta, a=1.0, b=1.0, stress=None):
         self._delta, self._A, self._dA, self._beta, self.a, self.b = delta, strain, strain_rate, beta, a, b
+        self._stress = stress  # given where sigma is not a A + b A' (Model B: a A + memory)
 
     def __call__(self, t, x=1.0):
         t = np.asarray(t, dtype=float)
@@ -44,6 +49,8 @@ class RodSolution:
 
     def stress(self, t):
         t = np.asarray(t, dtype=float)
+        if self._stress is not None:
+            return self._stress(t)
         return self.a * self._A(t) + self.b * self._dA(t)
 
 
@@ -118,6 +125,52 @@ def rod_ode(scene, rtol=1e-11, atol=1e-13):
     return RodSolution(delta=lambda t: np.broadcast_to(np.asarray(delta(t=t), dtype=float), np.shape(t)).copy(),
                        strain=lambda t: sol.sol(t)[0], strain_rate=strain_rate, beta=lambda t: sol.sol(t)[1],
                        a=a, b=b)
+
+
+def rod_memory(scene, n=4000):
+    """Reference for a Model B rod scene (memory, unilateral layer), as a :class:`RodSolution` without beta.
+
+    With a Prony kernel the memory variables obey an ODE, integrated by
+    :func:`workbench.volterra.solve_prony` (DOP853, rtol 1e-10); a general kernel
+    b(t) kernel_E is integrated by :func:`workbench.volterra.solve_quadrature` with
+    ``n`` and ``2 n`` steps and Richardson-extrapolated, then interpolated
+    linearly in t (error O((T/n)^2)).
+
+    Examples
+    --------
+    >>> import workbench
+    >>> ref = rod_memory(workbench.scene("memory_rod"))
+    >>> u, beta = ref(np.array([0.25]), x=1.0)
+    >>> bool(u[0] <= 0.1 + 1e-12), bool(np.isnan(beta[0]))  # the end never passes the layer (gap = 0.1)
+    (True, True)
+    """
+    from . import volterra
+
+    v = scene.values
+    if scene.geometry != "rod" or scene.model != "B":
+        raise ValueError(f"rod_memory needs a Model B rod scene, got {scene.name!r}")
+    delta = v["delta"]
+    common = dict(a=v["a"], ell=v["length"], F=v["F"], c=v["c"], g=v["gap"], T=v["T"],
+                  delta=lambda t: np.broadcast_to(np.asarray(delta(t=t), dtype=float), np.shape(t)))
+    nan = lambda t: np.full(np.shape(t), np.nan)  # noqa: E731
+    if v["prony"] or "memory" not in scene.terms:
+        moduli = [term[0] for term in v["prony"]]
+        taus = [term[-1] for term in v["prony"]]
+        sol = volterra.solve_prony(moduli=moduli, taus=taus, **common)
+        return RodSolution(delta=lambda t: common["delta"](np.asarray(t, float)).copy(), strain=sol.A,
+                           strain_rate=None, beta=nan, a=v["a"], b=0.0, stress=sol.sigma)
+    kernel = v["kernel"]
+    b = lambda t: v["kernel_E"] * np.broadcast_to(np.asarray(kernel(t=t), dtype=float), np.shape(t))  # noqa: E731
+    ext = volterra.richardson(volterra.solve_quadrature(kernel=b, n=n, **common),
+                              volterra.solve_quadrature(kernel=b, n=2 * n, **common))
+    A = lambda t: np.interp(t, ext.t, ext.A)  # noqa: E731
+    return RodSolution(delta=lambda t: common["delta"](np.asarray(t, float)).copy(), strain=A, strain_rate=None,
+                       beta=nan, a=v["a"], b=0.0, stress=lambda t: np.interp(t, ext.t, ext.sigma))
+
+
+def rod_reference(scene):
+    """The independent reference of a rod scene: :func:`rod_ode` (Model A) or :func:`rod_memory` (Model B)."""
+    return rod_memory(scene) if scene.model == "B" else rod_ode(scene)
 
 
 def modal_linear(K_A: np.ndarray, K_G: np.ndarray, F1: np.ndarray, free: np.ndarray):

@@ -48,7 +48,7 @@ MODEL_PARAMETERS = {
     ("slab", "A"): ("width", "height", "nx", "ny") + _TIME + _KV2D + _CONTACT + ("c_tau",) + _LOADS2D + _OUTPUT,
     ("block", "A"): ("width", "depth", "height", "nx", "ny", "nz") + _TIME + _KV2D + _CONTACT + ("c_tau",)
                     + _LOADS3D + _OUTPUT,
-    ("rod", "B"): ("length",) + _TIME_B + ("a",) + _UNILATERAL + ("kernel", "kernel_E", "prony", "delta", "u0")
+    ("rod", "B"): ("length",) + _TIME_B + ("a",) + _UNILATERAL + ("kernel", "kernel_E", "prony", "delta")
                   + _OUTPUT,
     ("slab", "B"): ("width", "height", "nx", "ny") + _TIME_B + ("E", "nu") + _UNILATERAL + _MEMORY + _LOADS2D
                    + _OUTPUT,
@@ -98,7 +98,7 @@ _SLAB_PAPER = dict(E=1000.0, nu=0.3, a1=30.0, a2=20.0, c_nu=1.0, gamma_nu=0.3, L
                    beta0=1.0, c_tau=0.0, T=1.0, snapshots=(0.1, 0.4, 0.6, 0.7, 0.8, 1.0))
 
 _MEMORY_ROD = dict(h=0.05, k=0.01, T=1.0, a=1.0, gap=0.1, F=0.05, c=1.0, scheme="vi",
-                   prony=((0.5, 0.2),), delta="0.3*sin(2*pi*t) - 0.05", u0="-0.05",
+                   prony=((0.5, 0.2),), delta="0.3*sin(2*pi*t) - 0.05",
                    snapshots=(0.25, 0.5, 0.75, 1.0))
 _MEMORY_2D = dict(width=2.0, height=1.0, h=0.05, k=0.02, T=1.0, E=1000.0, nu=0.3, scheme="vi",
                   gap=0.02, F=20.0, c=2000.0, prony=((-1000.0, 0.3, 0.5),),
@@ -207,6 +207,11 @@ class Scene:
                 for n in self.values]
 
 
+#: Parameters a model refuses with a reason (rather than as merely unknown).
+_NOT_APPLICABLE = {"B": {"u0": "without viscosity the problem is quasistatic in u, so u(0) is the solution of the "
+                               "inequality at t = 0 (computed), not an initial condition"}}
+
+
 def _known(base):
     preset = PRESETS[base]
     return {n: PARAMETERS[n] for n in MODEL_PARAMETERS[preset.geometry, preset.model]} | preset.extras
@@ -227,6 +232,9 @@ def make(name: str, overrides: dict | None = None, *, base: str | None = None, d
     known = _known(base)
     overrides = dict(overrides or {})
     for key in overrides:
+        if key in _NOT_APPLICABLE.get(preset.model, {}):
+            raise ParameterError(f"{key} does not apply to the Model {preset.model} scene {name!r}: "
+                                 + _NOT_APPLICABLE[preset.model][key])
         if key not in known:
             raise ParameterError(f"unknown parameter {key!r} for scene {name!r}" + closest_name(key, known))
     raw = {n: p.default for n, p in known.items()} | preset.values | overrides

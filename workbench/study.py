@@ -251,9 +251,9 @@ class Study:
         if self.ref_case is not None:
             return ("run", runs[self.ref_case])
         if isinstance(spec, str):
-            from .references import rod_ode
+            from .references import rod_reference
 
-            return ("solution", rod_ode(self.scene))
+            return ("solution", rod_reference(self.scene))
         return ("solution", spec)
 
     def _errors(self, case, ds, ref, compare):

@@ -97,6 +97,10 @@ class MemoryVI:
         self.work.data = K.mat * self.tmp
         out_np += self.work.FV().NumPy()
 
+    def start(self, t0: float) -> None:
+        """u(t0) is the solution of the inequality at t0 (no memory yet): quasistatic, there is no u0."""
+        self._equilibrium(t0, np.zeros(self.d.ndof))
+
     def step(self, t_prev: float, t_next: float) -> None:
         d = self.d
         k = t_next - t_prev
@@ -105,20 +109,28 @@ class MemoryVI:
         memory = np.zeros(d.ndof)
         if d.memory:
             self._memory_vector(t_prev, t_next, memory)
-        d.load_vector(t_next, self.rhs)
+        self._equilibrium(t_next, memory)
+        d.v.vec.FV().NumPy()[:] = (u - self.u_prev) / k
+        self.k_last = k
+
+    def _equilibrium(self, time: float, memory: np.ndarray) -> None:
+        """u = the solution of the inequality at ``time`` with the memory vector K_C H given."""
+        d = self.d
+        u = d.u.vec.FV().NumPy()
+        d.load_vector(time, self.rhs)
         self.rhs_np -= memory
         if self.lift:  # u = delta(t_n) at x = 0
             self.tmp.FV().NumPy()[:] = 0.0
-            self.tmp.FV().NumPy()[d.dirichlet_dofs] = d.dirichlet_value(t_next)
+            self.tmp.FV().NumPy()[d.dirichlet_dofs] = d.dirichlet_value(time)
             self.work.data = d.elastic.mat * self.tmp
             self.rhs_np -= self.work.FV().NumPy()
         self.solver.solve(self.rhs_np, self.z)
         if self.lift:
-            self.z[d.dirichlet_dofs] = d.dirichlet_value(t_next)
+            self.z[d.dirichlet_dofs] = d.dirichlet_value(time)
         solves = 1
         if self.C.size:
             s_free = self.sign * self.z[self.C]
-            s, lam, iterations = self._active_set(s_free, t_next)
+            s, lam, iterations = self._active_set(s_free, time)
             force = np.zeros(d.ndof)
             force[self.C] = self.sign * lam  # contact forces on the body, in dof direction: -(outward) ...
             out = np.zeros(d.ndof)
@@ -130,8 +142,6 @@ class MemoryVI:
         else:
             u[:] = self.z
             iterations = 0
-        d.v.vec.FV().NumPy()[:] = (u - self.u_prev) / k
-        self.k_last = k
         counts = np.bincount(self.states, minlength=4)
         self.diag = {
             "iterations": iterations, "linear_solves": solves + iterations,
@@ -194,9 +204,6 @@ class MemoryVI:
         return unilateral.state_of(s + self.rho * lam, self.rho * w, F, c, g)
 
     def diagnostics(self, initial=False) -> dict:
-        if initial:
-            return {"iterations": 0, "linear_solves": 0, "n_separated": int(self.C.size), "n_stuck": 0,
-                    "n_compliant": 0, "n_rigid": 0, "complementarity": 0.0}
         return dict(self.diag)
 
     def node_values(self) -> dict:

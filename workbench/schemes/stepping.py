@@ -112,6 +112,9 @@ def march(disc, scheme, times, recorder, *, progress=None, limit=None):
     u_np = disc.u.vec.FV().NumPy()
     bound = limit or math.inf
     nodes = getattr(scheme, "node_values", None)
+    start = getattr(scheme, "start", None)
+    if start is not None:
+        start(times[0])
     if recorder.wants(0):
         recorder.record(0, node_values=nodes() if nodes else None, **scheme.diagnostics(initial=True))
     if recorder.wants_snapshot(0):
