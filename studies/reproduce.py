@@ -382,16 +382,9 @@ def reproduce(problem, out=DEFAULT_OUT, h=None, k=None, side=True, vtk=False, **
 
 
 def _write_json(path, data):
-    import os
-    import tempfile
+    from workbench.files import atomic_write
 
-    path.parent.mkdir(parents=True, exist_ok=True)
-    fd, tmp = tempfile.mkstemp(prefix=f".{path.name}.", suffix=".tmp", dir=path.parent)
-    with os.fdopen(fd, "w") as f:
-        json.dump(data, f, indent=1, sort_keys=True)
-    os.chmod(tmp, 0o644)  # mkstemp creates 0600
-    os.replace(tmp, path)
-    return path
+    return atomic_write(path, lambda tmp: tmp.write_text(json.dumps(data, indent=1, sort_keys=True)))
 
 
 def report(problem, result) -> str:

@@ -91,8 +91,10 @@ def test_pareto_and_cheapest():
 
 
 def _study_cmd(out):
-    return [sys.executable, "-m", "workbench.cli", "study", "tp2", "--k", "0.02", "0.01", "0.005", "0.0025",
-            "--reference", "ode", "--workers", "1", "--no-progress", "-o", str(out)]
+    # one long case (k = 2e-4: 5000 steps, run first, on one worker) beside three short ones (on the other): when the
+    # first short case is archived the long one is still running, whatever the machine's speed
+    return [sys.executable, "-m", "workbench.cli", "study", "tp2", "--k", "0.02", "0.01", "0.005", "0.0002",
+            "--reference", "ode", "--workers", "2", "--no-progress", "-o", str(out)]
 
 
 def test_kill_and_resume(tmp_path):
@@ -127,3 +129,149 @@ def test_dask_local_cluster():
         ds = Study("tp2", k=[0.02, 0.01], reference="ode", client=client).run(progress=False)
     local = Study("tp2", k=[0.02, 0.01], reference="ode", workers=0).run(progress=False)
     np.testing.assert_allclose(ds.error.values, local.error.values, rtol=1e-12)
+
+
+def _cli(*args, **kw):
+    return subprocess.run([sys.executable, "-m", "workbench.cli", *args], capture_output=True, text=True, **kw)
+
+
+def test_case_files_are_keyed_by_every_input(tmp_path):
+    """The same sweep with other scene values recomputes its cases and says why (the stale cases gave order 0 and
+    an error of 0.133 while the archive claimed gamma_nu = 1.5); the same inputs again reuse them."""
+    out = str(tmp_path / "s.nc")
+    base = ["study", "tp2", "--k", "0.02", "0.01", "--reference", "ode", "--workers", "0", "--no-progress", "-o", out]
+    assert _cli(*base).returncode == 0
+    changed = base + ["--set", "gamma_nu=1.5", "--set", "L=0.2"]
+    p = _cli(*changed)
+    assert p.returncode == 0 and "recomputing" in p.stderr and "gamma_nu 0.1 -> 1.5" in p.stderr
+    ds = workbench.load(out)
+    fresh = Study("tp2", k=[0.02, 0.01], reference="ode", workers=0, gamma_nu=1.5, L=0.2).run(progress=False)
+    np.testing.assert_allclose(ds.error.values, fresh.error.values, rtol=1e-12)
+    assert float(ds.observed_order.sel(norm="error", along="k").squeeze()) > 0.9 and ds.attrs["gamma_nu"] == 1.5
+    stamps = {p.name: p.stat().st_mtime_ns for p in (tmp_path / "s.nc.cases").glob("*.nc")}
+    p = _cli(*changed)
+    assert p.returncode == 0 and "recomputing" not in p.stderr
+    assert stamps == {p.name: p.stat().st_mtime_ns for p in (tmp_path / "s.nc.cases").glob("*.nc")}
+
+
+def test_damaged_case_files_are_recomputed(tmp_path):
+    """An empty and a truncated case file (a kill, a full disk) are recomputed with a warning, not a traceback."""
+    cases = tmp_path / "cases"
+    st = Study("tp2", k=[0.02, 0.01], reference="ode", workers=0)
+    first = st.run(cases, progress=False)
+    files = sorted(cases.glob("*.nc"))
+    files[0].write_bytes(b"")
+    data = files[1].read_bytes()
+    files[1].write_bytes(data[: len(data) // 2])
+    with pytest.warns(RuntimeWarning, match="unreadable.*recomputing") as record:
+        again = Study("tp2", k=[0.02, 0.01], reference="ode", workers=0).run(cases, progress=False)
+    assert len([w for w in record if "recomputing" in str(w.message)]) == 2
+    np.testing.assert_allclose(again.error.values, first.error.values, rtol=1e-12)
+
+
+def test_stale_temporary_files_are_removed(tmp_path):
+    """A kill during a write leaves .NAME.PID.RANDOM.tmp; the next write of that target removes those of dead
+    processes (and leaves a live process's own)."""
+    ds = workbench.run("tp1", h=0.1, k=0.1, progress=False)
+    dead = subprocess.run([sys.executable, "-c", "import os; print(os.getpid())"], capture_output=True, text=True)
+    stale = tmp_path / f".a.nc.{int(dead.stdout)}.0badc0de.tmp"
+    stale.write_bytes(b"x" * 100)
+    live = tmp_path / f".a.nc.{os.getpid() if False else os.getppid()}.0badc0de.tmp"
+    live.write_bytes(b"y")
+    workbench.write(ds, tmp_path / "a.nc")
+    assert not stale.exists() and live.exists()
+    assert sorted(p.name for p in tmp_path.iterdir()) == sorted(["a.nc", live.name])
+
+
+SNIPPET = """
+from workbench import Study
+st = Study("tp2", k=[0.02, 0.01, 0.005], reference="ode")
+ds = st.run(progress=False)
+print("order", float(ds.observed_order.sel(norm="error", along="k").squeeze()))
+"""
+
+
+@pytest.mark.parametrize("how", ["script", "stdin"])
+def test_study_with_workers_in_a_plain_script(tmp_path, how):
+    """Default worker processes, no main guard: as a plain script and fed on standard input (the spawned pool of
+    the old code re-imported __main__ and died with BrokenProcessPool)."""
+    script = tmp_path / "plain.py"
+    script.write_text(SNIPPET)
+    if how == "script":
+        p = subprocess.run([sys.executable, str(script)], capture_output=True, text=True, cwd=tmp_path, timeout=300)
+    else:
+        p = subprocess.run([sys.executable], input=SNIPPET, capture_output=True, text=True, cwd=tmp_path, timeout=300)
+    assert p.returncode == 0, p.stderr
+    assert 0.9 < float(p.stdout.split("order")[1]) < 1.1
+
+
+def _children(pid):
+    out = subprocess.run(["ps", "-o", "pid=", "--ppid", str(pid)], capture_output=True, text=True).stdout
+    return [int(x) for x in out.split()]
+
+
+def _alive(pid):
+    try:
+        os.kill(pid, 0)
+    except ProcessLookupError:
+        return False
+    stat = open(f"/proc/{pid}/stat").read().split()[2] if os.path.exists(f"/proc/{pid}/stat") else "X"
+    return stat != "Z"
+
+
+@pytest.mark.parametrize("sig", [signal.SIGTERM, signal.SIGKILL])
+def test_workers_exit_when_the_study_is_killed(tmp_path, sig):
+    """Killing the `workbench study` process (plain kill or kill -9) leaves no worker running."""
+    cmd = [sys.executable, "-m", "workbench.cli", "study", "tp2", "--k", "0.0001", "0.00005", "--reference", "ode",
+           "--workers", "2", "--no-progress", "-o", str(tmp_path / "k.nc")]
+    proc = subprocess.Popen(cmd, stdout=subprocess.DEVNULL, stderr=subprocess.DEVNULL)
+    deadline = time.time() + 60
+    workers = []
+    while time.time() < deadline and len(workers) < 2:
+        time.sleep(0.1)
+        workers = _children(proc.pid)
+    assert len(workers) == 2
+    os.kill(proc.pid, sig)
+    proc.wait()
+    deadline = time.time() + 10
+    while time.time() < deadline and any(_alive(w) for w in workers):
+        time.sleep(0.1)
+    assert not any(_alive(w) for w in workers)
+
+
+def test_single_case_study_is_refused():
+    """reference = 'finest' with one case: nothing to compare; refused before any work (it exited 0 with NaN)."""
+    with pytest.raises(workbench.ParameterError, match="single case"):
+        Study("tp1", k=[0.01])
+    p = _cli("study", "tp1", "--k", "0.01")
+    assert p.returncode == 2 and p.stderr.startswith("error:")
+
+
+def test_study_axis_values_are_checked():
+    """k='0.1' (text) was read character by character; a study option out of range fails before any work."""
+    with pytest.raises(workbench.ParameterError, match="k = '0.1'"):
+        Study("tp1", k="0.1")
+    with pytest.raises(workbench.ParameterError, match="n_compare"):
+        Study("tp1", k=[0.02, 0.01], reference="ode", n_compare=0)
+    with pytest.raises(workbench.ParameterError, match="workers"):
+        Study("tp1", k=[0.02, 0.01], reference="ode", workers=-1)
+
+
+def test_study_set_of_a_swept_name():
+    """`--set h=...` in a study was dropped silently: it is the scene value (honoured) unless --h sweeps it too."""
+    p = _cli("study", "tp2", "--k", "0.02", "0.01", "--set", "k=0.01", "--reference", "ode", "--workers", "0")
+    assert p.returncode == 2 and "k is given twice" in p.stderr
+    st = Study("tp5", k=[0.02, 0.01], T=0.04, h=None, reference={"k": 0.005}, workers=0, **{"order": 1})
+    assert st.hs == [0.0125]
+
+
+def test_sweep_any_parameter_with_its_own_reference():
+    """A physical parameter as an axis: each c_nu value gets its own reference run (not the finest of another c_nu);
+    orders are fitted per c_nu."""
+    st = Study("tp5", h=[0.05, 0.025], sweep={"c_nu": [1.0, 5.0]}, reference={"h": 0.0125}, k=[0.01], T=0.1,
+               n_compare=2, workers=0)
+    assert len(st.reference.cases()) == 2
+    ds = st.run(progress=False)
+    assert ds.error.dims == ("h", "k", "order", "scheme", "c_nu")
+    assert np.isfinite(ds.error.values).all() and (ds.error.sel(h=0.025) < ds.error.sel(h=0.05)).all()
+    assert ds.observed_order.sel(norm="error", along="h").dims == ("order", "scheme", "c_nu")

@@ -10,6 +10,7 @@ from .results import load, write
 from .run import run
 from .scenes import Scene, scene
 from .schemes import Diverged
+from .study import Study
 
 __version__ = "0.1.0"
-__all__ = ["run", "load", "write", "scene", "Scene", "ParameterError", "Diverged"]
+__all__ = ["run", "load", "write", "scene", "Scene", "Study", "ParameterError", "Diverged"]

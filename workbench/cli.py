@@ -20,16 +20,29 @@ from .parameters import ParameterError
 EXIT_BAD_INPUT, EXIT_DIVERGED = 2, 3
 
 
-def _overrides(args) -> dict:
+def _overrides(args, swept=()) -> dict:
+    """Scene overrides from ``--set`` and the options ``--h --k --T --order --scheme``.
+
+    A name given twice (two ``--set``, or ``--set k=`` beside ``--k``) is refused. In a
+    study the options in ``swept`` are sweep axes, not scene values: they are left out
+    here, and a ``--set`` of the same name beside them is refused too.
+    """
     out = {}
     for item in args.set or []:
         if "=" not in item:
             raise ParameterError(f"--set {item!r}: write name=value, e.g. --set gamma_nu=0.5")
         name, value = item.split("=", 1)
-        out[name.strip()] = value.strip()
+        name = name.strip()
+        if name in out:
+            raise ParameterError(f"--set {name} is given twice ({out[name]!r} and {value.strip()!r}); give it once")
+        out[name] = value.strip()
     for name in ("h", "k", "order", "scheme", "T"):
         value = getattr(args, name, None)
-        if value is not None:
+        if value is None:
+            continue
+        if name in out:
+            raise ParameterError(f"{name} is given twice (--{name} and --set {name}=...); give it once")
+        if name not in swept:
             out[name] = value
     return out
 
@@ -129,7 +142,7 @@ def cmd_study(args) -> int:
     from . import plotting, results
     from .study import Study
 
-    overrides = {k: v for k, v in _overrides(args).items() if k not in ("h", "k", "order", "scheme")}
+    overrides = _overrides(args, swept=("h", "k", "order", "scheme"))
     st = Study(args.scene, h=args.h, k=args.k, k_over_h=args.k_over_h, order=args.order, scheme=args.scheme,
                reference=_reference(args.reference), n_compare=args.compare, workers=args.workers,
                client=args.scheduler, **overrides)

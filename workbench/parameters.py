@@ -13,7 +13,7 @@ Examples
 >>> PARAMETERS["nu"].check(0.5)
 Traceback (most recent call last):
 ...
-workbench.parameters.ParameterError: nu = 0.5 is outside the allowed range -1 < nu < 0.5
+workbench.errors.ParameterError: nu = 0.5 is outside the allowed range -1 < nu < 0.5
 """
 from __future__ import annotations
 
@@ -22,11 +22,8 @@ import json
 import math
 from dataclasses import dataclass
 
+from .errors import ParameterError
 from .expressions import Expression, ExpressionError, parse
-
-
-class ParameterError(ValueError):
-    """A bad parameter value or name; the message names the parameter and the allowed range."""
 
 
 @dataclass(frozen=True)

@@ -24,8 +24,6 @@ schema stores only str, int, float.
 from __future__ import annotations
 
 import json
-import os
-import tempfile
 import time as _time
 from datetime import datetime, timezone
 from pathlib import Path
@@ -249,21 +247,10 @@ def provenance(scene, extra: dict) -> dict:
 
 
 def write(ds: xr.Dataset, path) -> Path:
-    """Write ``ds`` to netCDF atomically: a temporary file in the same folder, then a rename."""
-    path = Path(path)
-    path.parent.mkdir(parents=True, exist_ok=True)
-    fd, tmp = tempfile.mkstemp(prefix=f".{path.name}.", suffix=".tmp", dir=path.parent)
-    os.close(fd)
-    try:
-        ds.to_netcdf(tmp, engine="netcdf4")
-        umask = os.umask(0)
-        os.umask(umask)
-        os.chmod(tmp, 0o666 & ~umask)  # mkstemp creates 0600; an archive is an ordinary file
-        os.replace(tmp, path)
-    except BaseException:
-        Path(tmp).unlink(missing_ok=True)
-        raise
-    return path
+    """Write ``ds`` to netCDF atomically (:func:`workbench.files.atomic_write`)."""
+    from .files import atomic_write
+
+    return atomic_write(path, lambda tmp: ds.to_netcdf(tmp, engine="netcdf4"))
 
 
 def load(path) -> xr.Dataset:
@@ -290,3 +277,16 @@ class Clock:
     def __exit__(self, *exc):
         self.wall = _time.perf_counter() - self.wall0
         self.cpu = _time.process_time() - self.cpu0
+
+
+def far_facet(beta: xr.DataArray) -> xr.DataArray:
+    """The bonding field on the contact facet farthest along x (the slab's (1, 0); the rod's only facet).
+
+    Examples
+    --------
+    >>> import workbench
+    >>> ds = workbench.run("tp4", h=0.1, k=0.05, T=0.1, progress=False)
+    >>> round(float(far_facet(ds.beta).facet_x), 3)
+    0.95
+    """
+    return beta.isel(facet=int(np.argmax(beta.facet_x.values)))

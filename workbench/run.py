@@ -17,6 +17,7 @@ import warnings
 
 from . import discretisation, meshes, results, scenes, stability
 from .schemes import SCHEMES, Diverged, march, time_grid
+from .threads import blas_single_threaded, task_manager
 
 #: Above this many steps only about MAX_RECORDS steps are recorded (evenly), unless asked otherwise.
 MAX_RECORDS = 2000
@@ -78,6 +79,12 @@ def run(scene, *, progress=None, record_times=None, times=None, limit=None, thre
     snaps = set(_steps_at(grid, sc["snapshots"], "snapshots").tolist()) if sc["snapshots"] else set()
     snaps.add(n_steps)
 
+    with blas_single_threaded():
+        return _run(sc, grid, record, snaps, progress, limit, threads)
+
+
+def _run(sc, grid, record, snaps, progress, limit, threads):
+    n_steps = len(grid) - 1
     with results.Clock() as setup:
         disc = discretisation.build(sc)
         scheme = SCHEMES[sc["scheme"]](disc)
@@ -90,13 +97,13 @@ def run(scene, *, progress=None, record_times=None, times=None, limit=None, thre
                 if not sc["allow_unstable"]:
                     stability.check(sc, k_max, est)
                 warnings.warn(f"k = {k_max:.3g} s > predicted k_crit = {est.k_crit:.3g} s: running the explicit "
-                              "scheme anyway (allow_unstable)", RuntimeWarning, stacklevel=2)
+                              "scheme anyway (allow_unstable)", RuntimeWarning, stacklevel=3)
                 checks["stability_override"] = 1
     recorder = results.Recorder(disc, grid, record, snaps)
     if limit is None:
         limit = 10.0 * max(sc.values.get(k, 0.0) for k in ("length", "width", "depth", "height"))
     failure = None
-    with results.Clock() as clock, _threads(threads):
+    with results.Clock() as clock, task_manager(threads):
         try:
             march(disc, scheme, grid, recorder, progress=progress, limit=limit)
         except Diverged as err:
@@ -124,25 +131,5 @@ def _bonding_resolution(sc, k):
     if not resolved:
         warnings.warn(f"k gamma_nu L^2 beta0 = {k * rate:.3g}: debonding (time scale {1 / rate:.3g} s) is faster "
                       f"than the step, so the bonding field is not resolved where |u_nu| ~ L (O(1) errors in beta "
-                      f"possible); use k <= {0.1 / rate:.2g} s for an accurate beta", RuntimeWarning, stacklevel=3)
+                      f"possible); use k <= {0.1 / rate:.2g} s for an accurate beta", RuntimeWarning, stacklevel=4)
     return {"bonding_resolved": int(resolved)}
-
-
-class _threads:
-    """NGSolve's TaskManager with ``n`` threads, or nothing."""
-
-    def __init__(self, n):
-        self.n, self.tm = n, None
-
-    def __enter__(self):
-        if self.n and self.n > 1:
-            import ngsolve as ngs
-
-            ngs.SetNumThreads(int(self.n))
-            self.tm = ngs.TaskManager()
-            self.tm.__enter__()
-        return self
-
-    def __exit__(self, *exc):
-        if self.tm is not None:
-            self.tm.__exit__(*exc)

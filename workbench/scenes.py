@@ -14,7 +14,7 @@ Examples
 >>> scene("tp1", gama_nu=1)
 Traceback (most recent call last):
 ...
-workbench.parameters.ParameterError: unknown parameter 'gama_nu' for scene 'tp1'; did you mean 'gamma_nu'?
+workbench.errors.ParameterError: unknown parameter 'gama_nu' for scene 'tp1'; did you mean 'gamma_nu'?
 """
 from __future__ import annotations
 

@@ -25,12 +25,8 @@ import numpy as np
 from scipy.sparse.linalg import LinearOperator, eigsh
 
 from . import discretisation, solvers
-from .parameters import ParameterError
+from .errors import StepTooLarge
 from .physics import contact
-
-
-class StepTooLarge(ParameterError):
-    """k exceeds the explicit scheme's predicted stability limit."""
 
 
 @dataclass(frozen=True)

@@ -31,12 +31,12 @@ Examples
 """
 from __future__ import annotations
 
-import os
-import tempfile
 import xml.etree.ElementTree as ET
 from pathlib import Path
 
 import numpy as np
+
+from .files import atomic_write
 
 #: VTK cell type of a volume cell by space dimension, and of a contact facet by space dimension.
 CELL_TYPE = {1: 3, 2: 5, 3: 10}
@@ -183,17 +183,7 @@ def _vtu(points, cells, cell_type, point_data, cell_data, field_data):
 
 
 def _write_atomic(path: Path, text: str) -> Path:
-    path.parent.mkdir(parents=True, exist_ok=True)
-    fd, tmp = tempfile.mkstemp(prefix=f".{path.name}.", suffix=".tmp", dir=path.parent)
-    try:
-        with os.fdopen(fd, "w", encoding="utf-8") as f:
-            f.write(text)
-        os.chmod(tmp, 0o644)  # mkstemp creates 0600; these are files to share
-        os.replace(tmp, path)
-    except BaseException:
-        Path(tmp).unlink(missing_ok=True)
-        raise
-    return path
+    return atomic_write(path, lambda tmp: tmp.write_text(text, encoding="utf-8"))
 
 
 def _xml_text(root) -> str:

@@ -7,10 +7,11 @@ condensed onto the contact dofs): unconditionally stable, first order.
 ``vi`` — Model B: one variational inequality per step (long memory, unilateral
 constraint with a compliant layer), primal-dual active set on the contact nodes.
 """
+from ..errors import Diverged, NewtonFailed
 from .explicit_euler import ExplicitEuler
-from .implicit_euler import ImplicitEuler, NewtonFailed
+from .implicit_euler import ImplicitEuler
 from .memory_vi import MemoryVI
-from .stepping import Diverged, march, time_grid
+from .stepping import march, time_grid
 
 SCHEMES = {"explicit": ExplicitEuler, "implicit": ImplicitEuler, "vi": MemoryVI}
 

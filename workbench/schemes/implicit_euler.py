@@ -42,11 +42,7 @@ import scipy.linalg as la
 from .. import solvers
 from ..condensation import CondensedSystem, ContactOperator
 from ..physics import bonding, contact, kelvin_voigt
-from .stepping import Diverged
-
-
-class NewtonFailed(Diverged):
-    """The semismooth Newton iteration of an implicit step did not converge."""
+from ..errors import NewtonFailed
 
 
 class ImplicitEuler:

@@ -26,7 +26,7 @@ import numpy as np
 from .. import solvers
 from ..condensation import CondensedSystem
 from ..physics import kelvin_voigt, unilateral
-from .implicit_euler import NewtonFailed
+from ..errors import NewtonFailed
 
 
 class MemoryVI:

@@ -5,17 +5,7 @@ import math
 
 import numpy as np
 
-
-class Diverged(RuntimeError):
-    """A run stopped because its state became non-finite or unbounded.
-
-    ``dataset`` holds everything computed up to the failing step, with
-    ``status = "incomplete"`` and the message in ``failure``.
-    """
-
-    def __init__(self, message, step=None, time=None, dataset=None):
-        super().__init__(message)
-        self.step, self.time, self.dataset = step, time, dataset
+from ..errors import Diverged
 
 
 def time_grid(T: float, k: float, times=None) -> np.ndarray:

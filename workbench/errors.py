@@ -1,0 +1,35 @@
+"""The exceptions a user meets, in one bottom-level module (every layer may raise them).
+
+* :class:`ParameterError` — bad input (a value out of range, an unknown name, an
+  impossible combination); raised before any work, the message names the
+  parameter and what is allowed. The command line turns it into one line and exit code 2.
+* :class:`StepTooLarge` — the explicit scheme's step exceeds its predicted stability limit.
+* :class:`Diverged` — a run stopped because its state became non-finite, unbounded
+  or oscillating; ``dataset`` holds what was computed, marked incomplete (exit code 3).
+* :class:`NewtonFailed` — an implicit step's nonlinear iteration did not converge.
+"""
+from __future__ import annotations
+
+
+class ParameterError(ValueError):
+    """A bad parameter value or name; the message names the parameter and the allowed range."""
+
+
+class StepTooLarge(ParameterError):
+    """k exceeds the explicit scheme's predicted stability limit."""
+
+
+class Diverged(RuntimeError):
+    """A run stopped because its state became non-finite or unbounded.
+
+    ``dataset`` holds everything computed up to the failing step, with
+    ``status = "incomplete"`` and the message in ``failure``.
+    """
+
+    def __init__(self, message, step=None, time=None, dataset=None):
+        super().__init__(message)
+        self.step, self.time, self.dataset = step, time, dataset
+
+
+class NewtonFailed(Diverged):
+    """The nonlinear iteration of an implicit step (semismooth Newton, active set) did not converge."""

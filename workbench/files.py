@@ -1,0 +1,110 @@
+"""Files: atomic writes, output paths checked before any work, names made safe for the file system.
+
+Every file workbench writes (archives, checkpoints, figures, VTK) goes through
+:func:`atomic_write`: the content is written to a hidden temporary file
+``.NAME.PID.RANDOM.tmp`` in the target folder and renamed over the target, so a
+reader never sees half a file and a kill leaves the previous file intact. The
+temporary files of processes that died before their rename are removed by the
+next write to the same target. Written files get the usual permissions (0666
+less the umask), as any other file the user creates.
+
+Examples
+--------
+>>> import tempfile, pathlib
+>>> p = atomic_write(pathlib.Path(tempfile.mkdtemp()) / "a.txt", lambda tmp: tmp.write_text("hello"))
+>>> p.read_text()
+'hello'
+>>> safe_name("../../x y$")
+'x_y_'
+"""
+from __future__ import annotations
+
+import os
+import re
+import secrets
+from pathlib import Path
+
+from .errors import ParameterError
+
+
+def _umask() -> int:
+    mask = os.umask(0)
+    os.umask(mask)
+    return mask
+
+
+def _alive(pid: int) -> bool:
+    try:
+        os.kill(pid, 0)
+    except ProcessLookupError:
+        return False
+    except PermissionError:  # exists, another user's
+        return True
+    return True
+
+
+def remove_stale_temporaries(path: Path) -> list:
+    """Remove ``.NAME.PID.*.tmp`` files next to ``path`` whose writing process is gone; return them."""
+    path = Path(path)
+    removed = []
+    pattern = re.compile(re.escape(f".{path.name}.") + r"(\d+)\.[0-9a-f]+\.tmp$")
+    try:
+        entries = list(path.parent.iterdir())
+    except OSError:
+        return removed
+    for entry in entries:
+        m = pattern.match(entry.name)
+        if m and int(m.group(1)) != os.getpid() and not _alive(int(m.group(1))):
+            try:
+                entry.unlink()
+                removed.append(entry)
+            except OSError:
+                pass
+    return removed
+
+
+def atomic_write(path, writer) -> Path:
+    """Write ``path`` atomically: ``writer(tmp_path)`` fills a temporary file that is then renamed."""
+    path = Path(path)
+    path.parent.mkdir(parents=True, exist_ok=True)
+    remove_stale_temporaries(path)
+    tmp = path.parent / f".{path.name}.{os.getpid()}.{secrets.token_hex(4)}.tmp"
+    try:
+        writer(tmp)
+        os.chmod(tmp, 0o666 & ~_umask())
+        os.replace(tmp, path)
+    except BaseException:
+        tmp.unlink(missing_ok=True)
+        raise
+    return path
+
+
+def check_output(path, option: str, *, folder: bool = False) -> Path:
+    """Refuse, before any work, an output path that cannot be written: an existing directory where a file is
+    meant (or a file where a folder is meant), a parent that is a file, a folder without write permission."""
+    path = Path(path)
+    if folder:
+        if path.exists() and not path.is_dir():
+            raise ParameterError(f"{option} {str(path)!r} is a file; give a folder for the files")
+        target = path
+    else:
+        if path.is_dir():
+            raise ParameterError(f"{option} {str(path)!r} is a directory; give a file name, e.g. {str(path / 'out')}")
+        target = path.parent
+    existing = target
+    while not existing.exists():
+        if existing.parent == existing:
+            break
+        existing = existing.parent
+    if existing.exists() and not existing.is_dir():
+        raise ParameterError(f"{option} {str(path)!r}: {str(existing)!r} is a file, not a folder")
+    if existing.exists() and not os.access(existing, os.W_OK | os.X_OK):
+        raise ParameterError(f"{option} {str(path)!r}: no permission to write in {str(existing)!r}")
+    return path
+
+
+def safe_name(name: str) -> str:
+    """A scene name as a file name: path separators and anything but letters, digits, '.', '-', '_' replaced."""
+    base = str(name).replace("\\", "/").split("/")[-1]
+    text = re.sub(r"[^A-Za-z0-9._-]+", "_", base).strip(".")
+    return text or "run"

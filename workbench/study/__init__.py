@@ -1,0 +1,301 @@
+"""Refinement studies: sweeps over h, k, element order, scheme and any scene parameter; errors, orders, cost.
+
+A :class:`Study` runs one scene on many cases (each in a worker subprocess, in
+this process, or on a dask.distributed cluster), archives every finished case at
+once (keyed by everything that determines it, :mod:`.cases`), compares each case
+with a reference (:mod:`.reference`), fits observed orders and measures the
+speed/accuracy trade (:mod:`.evaluate`).
+
+Examples
+--------
+>>> st = Study("tp1", k=[0.04, 0.02, 0.01], reference="ode", workers=0)
+>>> ds = st.run(progress=False)
+>>> round(float(ds.observed_order.sel(norm="error", along="k").squeeze()), 1)
+1.0
+"""
+from __future__ import annotations
+
+import tempfile
+import time
+import warnings
+from pathlib import Path
+
+import numpy as np
+import xarray as xr
+
+from .. import meshes, results, scenes
+from ..errors import ParameterError
+from ..results import attr_value
+from . import evaluate, execute, reference
+from .cases import BASE_AXES, Case, canonical, expand, fingerprint, inputs, positive_int, read_case
+from .evaluate import fit_order
+
+__all__ = ["Study", "Case", "cheapest", "fit_order"]
+
+
+class Study:
+    """A sweep over cases of one scene.
+
+    Parameters
+    ----------
+    scene : str, path or Scene
+    h, k : float or sequence of float, optional
+        Element sizes and time steps (default: the scene's). All combinations are
+        run, unless ``k_over_h`` couples them (k_i = k_over_h * h_i).
+    order, scheme : int/str or sequence, optional
+        Element orders and schemes to sweep (default: the scene's).
+    sweep : dict, optional
+        More axes: any scene parameter and its values, e.g. ``{"c_nu": [1, 100, 1e4]}``.
+    grids : list of dict, optional
+        A union of grids instead of one product: each dict overrides the axes above,
+        e.g. ``[{"scheme": ["implicit"], "k": [0.02, 0.01]}, {"scheme": ["explicit"], "k": [5e-4]}]``.
+    couple : dict, optional
+        Parameters computed from each case's values, e.g. ``{"k": lambda c: 0.2 * c["h"]}``
+        (``k_over_h`` is this coupling); they must depend on the first axis only.
+    reference : str, dict, object or None
+        ``"finest"`` (default: the finest case, then not reported as a case), ``"ode"``/``"exact"``
+        (rod scenes: :func:`workbench.references.rod_reference`), a dict of discretisation
+        values for a separate finer run, a solution object, or None (no errors).
+    measures : callable, optional
+        ``measures(ds) -> dict`` of scalars computed from each case's Dataset; with a run
+        reference, ``rel_error_<name>`` compares each with the reference's value.
+    n_compare : int
+        Number of common times at which whole fields are compared (default 10, T included).
+    workers : int
+        Local worker subprocesses running cases in parallel (default 2); 0 runs the cases
+        in this process, one after another.
+    client : dask.distributed.Client or str, optional
+        Run the cases on this cluster (or scheduler address) instead.
+    **overrides
+        Scene parameters for every case.
+    """
+
+    def __init__(self, scene, *, h=None, k=None, k_over_h=None, order=None, scheme=None, sweep=None, grids=None,
+                 couple=None, reference="finest", measures=None, n_compare=10, workers=2, client=None, **overrides):
+        self.scene = scenes.scene(scene, **overrides)
+        base = {name: value for name, value in (("h", h), ("k", k), ("order", order), ("scheme", scheme))
+                if value is not None}
+        for name in sweep or {}:
+            if name in base:
+                raise ParameterError(f"{name} is given twice (as {name}= and in sweep); give it once")
+        base |= dict(sweep or {})
+        couple = dict(couple or {})
+        if k_over_h is not None:
+            if k is not None or "k" in couple:
+                raise ParameterError("give either k or k_over_h, not both")
+            ratio = self.scene.with_()  # noqa: F841 (the scene is already checked)
+            if isinstance(k_over_h, bool) or not isinstance(k_over_h, (int, float)) or not k_over_h > 0 \
+                    or not np.isfinite(k_over_h):
+                raise ParameterError(f"k_over_h = {k_over_h!r} must be a number > 0")
+            c = float(k_over_h)
+            couple["k"] = lambda values: c * values["h"]
+        self.coupled = tuple(couple)
+        self.cases, self.axes = expand(self.scene, [dict(base, **g) for g in grids] if grids else [base], couple)
+        self.n_compare = positive_int("n_compare", n_compare)
+        self.workers = positive_int("workers", workers, lower=0)
+        self.client = client
+        self.measures = measures
+        self.reference_spec = reference
+        self.reference = reference_obj = _reference(reference, self)
+        self.listed = [c for c in self.cases if reference_obj is None or reference_obj.reported(c)]
+        if reference_obj is not None and not self.listed:
+            raise ParameterError(f"reference = 'finest' with a single case leaves nothing to compare: sweep at least two "
+                                 f"values (e.g. k=[0.02, 0.01]) or give a reference run or solution")
+        self.layout = evaluate.Layout(self.cases, self.axes, self.coupled)
+        self._scenes = {}
+        self.dataset = None
+        self.overhead = {}
+
+    # -- backwards-compatible views -----------------------------------------------------------------
+    @property
+    def hs(self):
+        return self.axes["h"] if "h" in self.axes else sorted({c.h for c in self.cases}, reverse=True)
+
+    @property
+    def ks(self):
+        return self.axes["k"] if "k" in self.axes else sorted({c.k for c in self.cases}, reverse=True)
+
+    @property
+    def ref_case(self):
+        """The reference case (the first, if cases of several physical settings each have one)."""
+        if self.reference is None or self.reference.kind != "run":
+            return None
+        return self.reference.cases()[0]
+
+    def scene_of(self, case: Case, snapshots=None):
+        """The checked scene of one case (with the study's comparison times as snapshots)."""
+        key = (case, None if snapshots is None else tuple(snapshots))
+        if key not in self._scenes:
+            extra = {} if snapshots is None else {"snapshots": tuple(snapshots)}
+            self._scenes[key] = self.scene.with_(**case.values(), **extra)
+        return self._scenes[key]
+
+    def _times(self):
+        """Common record times (the coarsest grid, if on every grid) and the field comparison times."""
+        from ..run import time_grid
+
+        T = self.scene["T"]
+        ks = sorted({c.k for c in self.cases + (self.reference.cases() if self.reference else [])}, reverse=True)
+        grids = [time_grid(T, k) for k in ks]
+        coarse = grids[int(np.argmin([len(g) for g in grids]))]
+        common = np.array([t for t in coarse if all(np.min(np.abs(g - t)) <= 1e-9 * max(T, 1.0) for g in grids)])
+        idx = np.unique(np.round(np.linspace(0, len(common) - 1, self.n_compare + 1)).astype(int))[1:]
+        return common, common[idx]
+
+    # -- running ---------------------------------------------------------------------------------------
+    def run(self, archive=None, *, progress=None) -> xr.Dataset:
+        """Run the cases that have no valid archive (each archived on completion in ``archive``), then evaluate.
+
+        With ``archive`` (a folder), a sweep that was interrupted and is run again
+        recomputes only the cases whose archive is missing, unreadable or made from
+        other inputs (each such case is reported); the result is identical.
+        """
+        from tqdm.auto import tqdm
+
+        record, compare = self._times()
+        archive = Path(archive) if archive is not None else Path(tempfile.mkdtemp(prefix="workbench-study-"))
+        archive.mkdir(parents=True, exist_ok=True)
+        todo = list(dict.fromkeys(self.listed + (self.reference.cases() if self.reference else [])))
+        runs, missing, expected = {}, [], {}
+        for case in todo:
+            expected[case] = inputs(self.scene_of(case, compare), record, compare)
+            ds, reason = read_case(archive / f"{case.key}.nc", expected[case])
+            if ds is not None:
+                runs[case] = ds
+            else:
+                if reason:
+                    warnings.warn(f"study case {archive / (case.key + '.nc')}: {reason}; recomputing it",
+                                  RuntimeWarning, stacklevel=2)
+                missing.append(case)
+        missing.sort(key=self._cost_estimate, reverse=True)  # biggest first, so the pool ends evenly
+        tasks = [(c, (self.scene, c.values(), list(record), list(compare),
+                      {"case_inputs": canonical(expected[c]), "case_fingerprint": fingerprint(expected[c])}))
+                 for c in missing]
+        if self.client is not None:
+            stream = execute.on_cluster(tasks, self.client)
+        elif self.workers == 0:
+            stream = execute.in_process(tasks)
+        else:
+            stream = execute.subprocesses(tasks, self.workers)
+        t0 = time.perf_counter()
+        bar = tqdm(total=len(todo), initial=len(todo) - len(missing), unit="case", desc=f"study {self.scene.name}",
+                   disable=None if progress is None else not progress)
+        try:
+            for case, ds in stream:
+                results.write(ds, archive / f"{case.key}.nc")
+                runs[case] = ds
+                bar.update()
+        finally:
+            bar.close()
+        executed = time.perf_counter() - t0
+        self.dataset = self._evaluate(runs, compare)
+        case_cost = float(np.nansum(self.dataset["wall_time"]) + np.nansum(self.dataset["setup_time"]))
+        self.overhead = dict(execute=executed, cases=case_cost, new_cases=len(missing),
+                             evaluate=time.perf_counter() - t0 - executed)
+        return self.dataset
+
+    def _cost_estimate(self, case):
+        sc = self.scene_of(case)
+        return float(np.prod(meshes.cells(sc))) * case.order ** sc.dim / case.k
+
+    # -- evaluation ------------------------------------------------------------------------------------
+    def _evaluate(self, runs, compare) -> xr.Dataset:
+        ref = self.reference
+        rows, methods = {}, set()
+        ref_measures = {}
+        for case in self.listed:
+            ds = runs[case]
+            a = ds.attrs
+            row = {n: a.get(n, np.nan) for n in evaluate.COSTS}
+            row |= {"ndof": a["ndof"], "nsteps": a["nsteps"], "complete": int(a["status"] == "complete")}
+            if ref is not None and a["status"] == "complete":
+                err = ref.errors(case, self.scene_of(case, compare), ds, runs, compare,
+                                 lambda c: self.scene_of(c, compare))
+                methods.add(err.pop("transfer", "same mesh / exact solution"))
+                row |= err
+            if self.measures is not None:
+                values = {n: float(v) for n, v in self.measures(ds).items()}
+                row |= values
+                if ref is not None and ref.kind == "run":
+                    rc = ref.of(case)
+                    if rc not in ref_measures:
+                        ref_measures[rc] = {n: float(v) for n, v in self.measures(runs[rc]).items()}
+                    for n, v in values.items():
+                        r = ref_measures[rc][n]
+                        row[f"rel_error_{n}"] = abs(v - r) / abs(r) if r != 0 else np.nan
+            rows[case] = row
+        first = runs[self.listed[0]]
+        probe_coords = {f"probe_{c}": ("probe", first[f"probe_{c}"].values) for c in ("x", "y", "z")[: self.scene.dim]}
+        ds = evaluate.dataset(self.layout, rows, first.sizes["probe"], probe_coords, self.scene.dim)
+        ds["compare_time"] = ("compare", np.asarray(compare), {"units": "s",
+                                                               "long_name": "times at which fields are compared"})
+        for name in ds.coords:
+            if name in ("h", "k"):
+                ds[name].attrs.update(units="s" if name == "k" else "m",
+                                      long_name="time step" if name == "k" else "target element size")
+        swept = set(self.axes) | set(self.coupled)
+        ref_case = self.ref_case
+        ds.attrs = {
+            "scene": self.scene.name, "geometry": self.scene.geometry, "model": self.scene.model,
+            "reference": ref.describe() if ref is not None else "none",
+            "reference_case": ref_case.key if ref_case is not None else "",
+            "transfer": "; ".join(sorted(methods)) or "same mesh / exact solution",
+            "coupling": ("k = k_over_h * h" if self.coupled == ("k",) else ", ".join(self.coupled)) if self.coupled
+            else "product of the axes" + (" (union of grids)" if not ds.ran.all() else ""),
+            "axes": ",".join(self.axes),
+            "parameters_json": canonical(self.scene.plain()),
+            "cases_total_wall_time": float(np.nansum(ds["wall_time"]) + np.nansum(ds["setup_time"])),
+            "history": f"workbench study {self.scene.name}",
+        } | {k: attr_value(v) for k, v in self.scene.values.items() if k not in swept}
+        return ds
+
+    # -- questions ---------------------------------------------------------------------------------------
+    def assert_order(self, expected: float, tol: float = 0.1, *, norm: str = "error", along: str | None = None,
+                     at_least: bool = False, max_error: float | None = None) -> None:
+        """Check the fitted order(s): |order - expected| <= tol (or order >= expected - tol with ``at_least``).
+
+        ``along`` defaults to "h+k" for coupled sweeps, else the swept refinement axis.
+        ``max_error`` caps the smallest error, so a wrong constant cannot hide behind a good slope.
+        """
+        ds = self.dataset
+        if ds is None:
+            raise RuntimeError("run the study first")
+        along = along or ("h+k" if self.coupled else ("h" if len(self.hs) > 1 else "k"))
+        rates = ds.observed_order.sel(norm=norm, along=along).values.ravel()
+        if not np.all(np.isfinite(rates)):
+            raise AssertionError(f"no fitted order for {norm} along {along}: {rates}")
+        bad = rates < expected - tol if at_least else np.abs(rates - expected) > tol
+        if np.any(bad):
+            raise AssertionError(f"observed order of {norm} along {along}: {np.round(rates, 3).tolist()}, "
+                                 f"expected {'>= ' if at_least else ''}{expected} within {tol}")
+        if max_error is not None:
+            smallest = float(np.nanmin(ds[norm].values))
+            if smallest > max_error:
+                raise AssertionError(f"smallest {norm} = {smallest:.3g} exceeds the cap {max_error:.3g}")
+
+    def cheapest(self, tolerance: float, *, error: str = "error", cost: str = "wall_time"):
+        """The cheapest case whose ``error`` is <= ``tolerance`` (None if none reaches it)."""
+        return cheapest(self.dataset, tolerance, error=error, cost=cost)
+
+
+def _reference(spec, study):
+    return reference.make(spec, study.scene, study.cases, study.axes)
+
+
+def cheapest(ds: xr.Dataset, tolerance: float, *, error: str = "error", cost: str = "wall_time"):
+    """The cheapest case of a study Dataset with ``ds[error] <= tolerance``, as a dict."""
+    err = ds[error]
+    c = ds[cost] + (ds["setup_time"] if cost == "wall_time" else 0)
+    ok = (err <= tolerance) & np.isfinite(c)
+    if not bool(ok.any()):
+        return None
+    masked = c.where(ok)
+    flat = int(np.nanargmin(masked.values))
+    idx = np.unravel_index(flat, masked.shape)
+    point = {d: masked[d].values[i] for d, i in zip(masked.dims, idx)}
+    sel = ds.isel(dict(zip(masked.dims, idx)))
+    return {**{d: (v.item() if hasattr(v, "item") else v) for d, v in point.items()},
+            "h": float(sel.h), "k": float(sel.k), error: float(sel[error]), cost: float(masked.values[idx])}
+
+
+BASE_AXES = BASE_AXES

@@ -1,0 +1,220 @@
+"""A study's Dataset: per-case errors, measures and costs on the sweep's axes; fitted orders; Pareto front.
+
+Dimensions are the sweep axes (``h``, ``k``, ``order``, ``scheme``, then any other
+swept parameter). When a parameter is coupled to the others (``k = 0.2 h``), the
+first axis and the coupled parameters become coordinates of one dimension
+``level``. Cases that a union of grids does not contain are NaN (``ran = 0``).
+
+Observed orders: the least-squares slope of log(error) against log(x) along each
+refinement axis with more than one value (the other refinement axes at their
+finest value), or, for coupled sweeps, along ``h``, ``k`` (only if h is fixed)
+and ``h+k``, for every combination of the remaining axes (``DataArray.polyfit``).
+"""
+from __future__ import annotations
+
+import warnings
+
+import numpy as np
+import xarray as xr
+
+from .cases import REFINEMENT
+
+NORMS = ("error", "error_V", "error_Q", "error_beta", "error_beta_end")
+COSTS = ("wall_time", "cpu_time", "setup_time", "memory_peak_mb", "h_max")
+_UNITS = {"wall_time": "s", "cpu_time": "s", "setup_time": "s", "memory_peak_mb": "MB", "h_max": "m",
+          "ndof": "1", "nsteps": "1"}
+_LONG = {"error": "max over compared times of |u - u_ref|_V + |sigma - sigma_ref|_Q + |beta - beta_ref|_L2(Gamma3)",
+         "error_V": "max over compared times of ||eps(u - u_ref)||_L2",
+         "error_Q": "max over compared times of ||sigma - sigma_ref||_L2",
+         "error_beta": "max over compared times of ||beta - beta_ref||_L2(Gamma3)",
+         "error_beta_end": "max over recorded times of |beta - beta_ref| on the facet at the far end",
+         "wall_time": "wall time of the time loop", "cpu_time": "CPU time of the time loop",
+         "setup_time": "wall time of assembly and factorisation", "memory_peak_mb": "peak resident memory",
+         "h_max": "longest cell side", "ndof": "displacement dofs", "nsteps": "time steps"}
+
+
+def _error_units(dim: int) -> dict:
+    """Units of the L2 norms over a body of dimension ``dim`` (its contact side has dimension dim - 1)."""
+    half = {0: "", 1: "m^(1/2)", 2: "m", 3: "m^(3/2)"}.get
+    return {"error": "mixed (sum of the three norms)", "error_V": half(dim) or "1",
+            "error_Q": f"Pa {half(dim)}".strip(), "error_beta": half(dim - 1) or "1", "error_beta_end": "1"}
+
+
+class Layout:
+    """Dimensions and coordinates of a study Dataset, and where each case sits in it."""
+
+    def __init__(self, cases, axes: dict, coupled: tuple):
+        self.axes, self.coupled = axes, tuple(coupled)
+        names = list(axes)
+        if coupled:
+            self.driver = names[0]
+            self.dims = ("level",) + tuple(names[1:])
+            self.levels = list(axes[self.driver])
+            self.level_coords = {n: [] for n in coupled}
+            for level_value in self.levels:
+                for n in coupled:
+                    seen = {c[n] for c in cases if c[self.driver] == level_value}
+                    if len(seen) != 1:
+                        from ..errors import ParameterError
+
+                        raise ParameterError(f"the coupled parameter {n} must depend on {self.driver} only "
+                                             f"(it takes {sorted(seen)} at {self.driver} = {level_value})")
+                    self.level_coords[n].append(seen.pop())
+        else:
+            self.driver = None
+            self.dims = tuple(names)
+        self.shape = tuple(len(self.levels) if d == "level" else len(axes[d]) for d in self.dims)
+
+    def index(self, case) -> tuple:
+        out = []
+        for d in self.dims:
+            if d == "level":
+                out.append(self.levels.index(case[self.driver]))
+            else:
+                out.append(self.axes[d].index(case[d]))
+        return tuple(out)
+
+    def coords(self) -> dict:
+        coords = {}
+        for d in self.dims:
+            if d == "level":
+                coords["level"] = np.arange(len(self.levels))
+                coords[self.driver] = ("level", list(self.levels))
+                for n, vals in self.level_coords.items():
+                    coords[n] = ("level", vals)
+            else:
+                coords[d] = list(self.axes[d])
+        return coords
+
+
+def dataset(layout: Layout, rows: dict, n_probe: int, probe_coords: dict, dim: int) -> xr.Dataset:
+    """The study Dataset from per-case ``rows`` (case -> dict of values) on ``layout``."""
+    dims, shape = layout.dims, layout.shape
+    names = list(NORMS) + list(COSTS) + sorted({k for r in rows.values() for k in r
+                                                if k not in NORMS + COSTS + ("ndof", "nsteps", "complete",
+                                                                             "error_probe", "transfer")})
+    arrays = {n: np.full(shape, np.nan) for n in names}
+    ints = {n: np.full(shape, -1, dtype=np.int64) for n in ("ndof", "nsteps")}
+    complete = np.zeros(shape, dtype=np.int8)
+    ran = np.zeros(shape, dtype=np.int8)
+    probe_err = np.full(shape + (n_probe,), np.nan)
+    for case, row in rows.items():
+        i = layout.index(case)
+        ran[i] = 1
+        for n in names:
+            if n in row:
+                arrays[n][i] = row[n]
+        for n in ints:
+            ints[n][i] = row[n]
+        complete[i] = row["complete"]
+        if "error_probe" in row:
+            probe_err[i] = row["error_probe"]
+    data = {}
+    for n, arr in list(arrays.items()) + list(ints.items()):
+        units = _UNITS.get(n, _error_units(dim).get(n, "1"))
+        data[n] = (dims, arr, {"units": units, "long_name": _LONG.get(n, n.replace("_", " "))})
+    data["error_probe"] = (dims + ("probe",), probe_err,
+                           {"units": "m", "long_name": "max over time of |u - u_ref| at the probe"})
+    data["complete"] = (dims, complete, {"units": "1", "long_name": "1 if the case ran to T"})
+    data["ran"] = (dims, ran, {"units": "1", "long_name": "1 if the case is part of the sweep (0: a hole of a "
+                                                          "union of grids)"})
+    coords = layout.coords() | {"probe": np.arange(n_probe)} | probe_coords
+    ds = xr.Dataset(data, coords=coords)
+    orders, spread = fit(ds, layout)
+    ds["observed_order"] = orders
+    ds["observed_order_stderr"] = spread
+    ds["pareto"] = (dims, pareto_front(ds["error"].values, (ds["wall_time"] + ds["setup_time"]).values),
+                    {"units": "1", "long_name": "1 if no other case is both cheaper and more accurate"})
+    return ds
+
+
+def _alongs(layout: Layout) -> list:
+    if layout.coupled:
+        return [a for a in ("h", "k", "h+k") if a == "h+k" or a == layout.driver or a in layout.coupled]
+    return [a for a in REFINEMENT if a in layout.axes] + ["h+k"]
+
+
+def fit(ds: xr.Dataset, layout: Layout):
+    """observed_order(norm, along, *other axes) and its standard error (see the module docs)."""
+    alongs = _alongs(layout)
+    series_dims = {"level"} if layout.coupled else set(REFINEMENT) & set(layout.dims)
+    rest = [d for d in layout.dims if d not in series_dims]
+    coeff, err = [], []
+    for norm in NORMS:
+        c_row, e_row = [], []
+        for along in alongs:
+            c, e = _fit_one(ds[norm], layout, along, rest)
+            c_row.append(c)
+            e_row.append(e)
+        coeff.append(xr.concat(c_row, dim="along"))
+        err.append(xr.concat(e_row, dim="along"))
+    coords = {"norm": list(NORMS), "along": alongs}
+    o = xr.concat(coeff, dim="norm").assign_coords(coords).transpose("norm", "along", *rest)
+    s = xr.concat(err, dim="norm").assign_coords(coords).transpose("norm", "along", *rest)
+    o.attrs = {"units": "1", "long_name": "least-squares slope of log error"}
+    s.attrs = {"units": "1", "long_name": "standard error of the slope"}
+    return o, s
+
+
+def _fit_one(err: xr.DataArray, layout: Layout, along: str, rest: list):
+    template = err.isel({d: 0 for d in err.dims if d not in rest}, drop=True) * np.nan
+    if layout.coupled:
+        if along == "k" and len(set(layout.levels)) > 1 and "k" in layout.coupled:
+            return template, template
+        dim = "level"
+        x = err["h"].values + err["k"].values if along == "h+k" else err[along].values
+        y = err
+    else:
+        if along not in layout.axes or len(layout.axes[along]) < 2:
+            return template, template
+        dim = along
+        others = {d: -1 for d in REFINEMENT if d in err.dims and d != along}
+        y = err.isel(others, drop=True)
+        x = np.asarray(layout.axes[along], dtype=float)
+    with np.errstate(divide="ignore", invalid="ignore"):
+        logy = np.log(y.where(np.isfinite(y) & (y > 0)))
+    logy = logy.drop_vars([c for c in logy.coords if dim in logy[c].dims and c != dim])
+    logy = logy.assign_coords({dim: np.log(np.asarray(x, dtype=float))})
+    count = np.isfinite(logy).sum(dim)
+    if int(count.max()) < 2:
+        return template, template
+    with warnings.catch_warnings():  # slices with fewer than two points are masked below
+        warnings.simplefilter("ignore", np.exceptions.RankWarning)
+        res = logy.polyfit(dim, 1, skipna=True)
+    slope = res.polyfit_coefficients.sel(degree=1, drop=True).where(count >= 2)
+    # standard error of the slope from the residuals: s^2 / sum (x - mean x)^2, s^2 = sum r^2 / (n - 2)
+    valid = np.isfinite(logy)
+    xs = xr.where(valid, logy[dim], np.nan)
+    resid = logy - xr.polyval(logy[dim], res.polyfit_coefficients)
+    with np.errstate(divide="ignore", invalid="ignore"):
+        s2 = (resid ** 2).sum(dim) / (count - 2)
+        sxx = ((xs - xs.mean(dim)) ** 2).sum(dim)
+        stderr = np.sqrt(s2 / sxx).where(count >= 3)
+    keep = lambda a: a.drop_vars([c for c in a.coords if c not in rest])  # noqa: E731
+    return keep(slope), keep(stderr)
+
+
+def pareto_front(err: np.ndarray, cost: np.ndarray) -> np.ndarray:
+    """1 where no other case is both at least as cheap and as accurate, and better in one."""
+    flat_e, flat_c = err.ravel(), cost.ravel()
+    out = np.zeros(flat_e.shape, dtype=np.int8)
+    ok = np.isfinite(flat_e) & np.isfinite(flat_c)
+    for i in np.nonzero(ok)[0]:
+        dominated = ok & (flat_e <= flat_e[i]) & (flat_c <= flat_c[i]) & ((flat_e < flat_e[i]) | (flat_c < flat_c[i]))
+        out[i] = not dominated.any()
+    return out.reshape(err.shape)
+
+
+def fit_order(x, y):
+    """Least-squares slope of log(y) against log(x) and its standard error (NaN with two points).
+
+    Examples
+    --------
+    >>> round(fit_order([0.1, 0.05, 0.025], [1.0, 0.5, 0.25])[0], 12)
+    1.0
+    """
+    lx, ly = np.log(np.asarray(x, float)), np.log(np.asarray(y, float))
+    if len(lx) == 2:
+        return float((ly[1] - ly[0]) / (lx[1] - lx[0])), np.nan
+    coef, cov = np.polyfit(lx, ly, 1, cov=True)
+    return float(coef[0]), float(np.sqrt(cov[0, 0]))

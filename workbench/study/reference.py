@@ -1,0 +1,191 @@
+"""What a study compares its cases with: a finer run, an independent solution, or nothing.
+
+Errors (SPEC, Corollary 6.7), at the study's comparison times t_j:
+``error = max_j (|u - u_ref|_V + |sigma - sigma_ref|_Q + |beta - beta_ref|_L2(Gamma3))``,
+each part also alone (``error_V``, ``error_Q``, ``error_beta``), the probe errors
+``error_probe`` (max over the common recorded times) and the bonding field at the
+far end of the contact side ``error_beta_end``.
+
+* :class:`RunReference` — a separate, finer run of the same scene (or the finest
+  case of the sweep, which is then not reported as a case); fields are compared
+  on the finer of the two meshes (:mod:`workbench.transfer`). Cases that differ
+  in a physical parameter (``c_nu``, ``gamma_nu``, ...) each get their own
+  reference run; cases that differ only in their discretisation share one.
+* :class:`SolutionReference` — an exact or ODE/Volterra solution of a rod scene
+  (:func:`workbench.references.rod_reference`), or any object with the same calls.
+* ``None`` — no errors (a sweep of measures only).
+
+A case is never its own reference.
+"""
+from __future__ import annotations
+
+import json
+
+import numpy as np
+
+from .. import transfer
+from ..errors import ParameterError
+from ..results import far_facet
+from .cases import DISCRETISATION, Case
+
+
+def physics_of(case: Case) -> tuple:
+    """The values of a case that change the modelled problem (not its discretisation)."""
+    return tuple((k, v) for k, v in case.values().items() if k not in DISCRETISATION)
+
+
+class RunReference:
+    """A finer run per physical setting; ``listed``: whether the reference cases are also reported as cases."""
+
+    kind = "run"
+
+    def __init__(self, cases, values: dict, listed: bool, describe: str):
+        self.listed = listed
+        self.by_physics = {}
+        for case in cases:
+            group = physics_of(case)
+            if group not in self.by_physics:
+                self.by_physics[group] = Case(dict(case.values(), **values))
+        self._describe = describe
+
+    def cases(self) -> list:
+        return list(dict.fromkeys(self.by_physics.values()))
+
+    def of(self, case: Case) -> Case:
+        return self.by_physics[physics_of(case)]
+
+    def reported(self, case: Case) -> bool:
+        return self.listed or case not in self.by_physics.values()
+
+    def describe(self) -> str:
+        return self._describe
+
+    def errors(self, case, case_scene, ds, runs, compare, scene_of) -> dict:
+        ref_case = self.of(case)
+        R = runs[ref_case]
+        fine_first = R.attrs["ndof"] >= ds.attrs["ndof"]
+        coarse_sc, fine_sc = case_scene, scene_of(ref_case)
+        if not fine_first:
+            coarse_sc, fine_sc = fine_sc, coarse_sc
+        ci, fi = transfer.mesh_info(coarse_sc), transfer.mesh_info(fine_sc)
+        tr = transfer.Transfer(ci, fi)
+        cds, fds = (ds, R) if fine_first else (R, ds)
+        parts = []
+        for t in compare:
+            i_c, i_f = snapshot_index(cds, t), snapshot_index(fds, t)
+            du = fds.u_dofs.values[i_f] - tr.displacement(cds.u_dofs.values[i_c], cds.u_nodes.values[i_c])
+            dsig = fds.stress.values[i_f] - tr.cells(cds.stress.values[i_c])
+            dbeta = None
+            if "beta" in ds:
+                dbeta = fds.beta.sel(time=t, method="nearest").values - tr.facets(
+                    cds.beta.sel(time=t, method="nearest").values)
+            parts.append(transfer.norms(fi, du, dsig, dbeta))
+        t_rec = ds.time.values
+        ref_probe = R.u_probe.sel(time=t_rec, method="nearest").values
+        ref_end = far_facet(R.beta).sel(time=t_rec, method="nearest").values if "beta" in ds else None
+        out = _combine(parts, ds, ref_probe, ref_end)
+        out["transfer"] = tr.method
+        return out
+
+
+class SolutionReference:
+    """An independent solution object: ``solution(t, x) -> (u, beta)`` and ``solution.stress(t)`` (rod scenes)."""
+
+    kind = "solution"
+
+    def __init__(self, make, describe: str):
+        self.make, self._describe = make, describe
+        self._cache = {}
+
+    def cases(self) -> list:
+        return []
+
+    def reported(self, case: Case) -> bool:
+        return True
+
+    def describe(self) -> str:
+        return self._describe
+
+    def solution(self, case_scene):
+        key = json.dumps({k: v for k, v in case_scene.plain().items() if k not in DISCRETISATION}, sort_keys=True,
+                         default=str)
+        if key not in self._cache:
+            self._cache[key] = self.make(case_scene)
+        return self._cache[key]
+
+    def errors(self, case, case_scene, ds, runs, compare, scene_of) -> dict:
+        sol = self.solution(case_scene)
+        info = transfer.mesh_info(case_scene)
+        t_rec = ds.time.values
+        parts = []
+        for t in compare:
+            i = snapshot_index(ds, t)
+            u_ref, beta_ref = sol(np.array([t]), x=info.xyz[:, 0])
+            ref_vec = np.zeros(info.fes.ndof)
+            ref_vec[: len(info.xyz)] = np.ravel(u_ref)  # linear in x: vertex values are the whole field
+            du = ds.u_dofs.values[i] - ref_vec
+            dsig = ds.stress.values[i] - np.ravel(sol.stress(np.array([t])))[0]
+            dbeta = ds.beta.values[np.argmin(np.abs(t_rec - t))] - np.ravel(beta_ref)[0] if "beta" in ds else None
+            parts.append(transfer.norms(info, du, dsig, dbeta))
+        xs = ds.probe_x.values
+        ref_probe = np.stack([sol(t_rec, x=x)[0] for x in xs], axis=1)[..., None]
+        ref_end = sol(t_rec)[1] if "beta" in ds else None
+        return _combine(parts, ds, ref_probe, ref_end)
+
+
+def _combine(parts, ds, ref_probe, ref_end) -> dict:
+    parts = np.array(parts)
+    out = {}
+    out["error_V"], out["error_Q"] = np.max(parts[:, :2], axis=0)
+    out["error_beta"] = float(np.max(parts[:, 2])) if np.isfinite(parts[:, 2]).all() else np.nan
+    out["error"] = float(np.max(np.nansum(parts, axis=1)))
+    out["error_probe"] = np.max(np.linalg.norm(ds.u_probe.values - ref_probe, axis=-1), axis=0)
+    if ref_end is not None:
+        out["error_beta_end"] = float(np.max(np.abs(far_facet(ds.beta).values - ref_end)))
+    return out
+
+
+def snapshot_index(ds, t) -> int:
+    """Index of the field snapshot at time t (it must exist)."""
+    i = int(np.argmin(np.abs(ds.snapshot_time.values - t)))
+    if abs(ds.snapshot_time.values[i] - t) > 1e-9 * max(1.0, abs(t)):
+        raise ValueError(f"no field snapshot at t = {t}")
+    return i
+
+
+def make(spec, scene, cases, axes):
+    """The reference object for a Study's ``reference`` argument (see the module docs)."""
+    if spec is None:
+        return None
+    if isinstance(spec, str):
+        if spec == "finest":
+            best = min(cases, key=lambda c: (c.h, c.k, -c.order, c.scheme != "implicit"))
+            values = {k: v for k, v in best.values().items() if k in DISCRETISATION}
+            return RunReference(cases, values, listed=False, describe="finest")
+        if spec in ("ode", "exact"):
+            if scene.geometry != "rod":
+                raise ParameterError(f"reference = {spec!r} needs a rod scene (an ODE/Volterra reference exists only "
+                                     "there); use 'finest' or a finer run such as {'h': 0.005, 'k': 0.0005}")
+            from ..references import rod_reference
+
+            return SolutionReference(rod_reference, describe=spec)
+        raise ParameterError(f"reference = {spec!r}; allowed: 'finest', 'ode', 'exact', a dict of discretisation "
+                             "values such as {'h': 0.005, 'k': 0.0005}, or a solution object")
+    if isinstance(spec, dict):
+        unknown = set(spec) - DISCRETISATION
+        if unknown:
+            raise ParameterError(f"reference: unknown key(s) {sorted(unknown)}; allowed: "
+                                 f"{', '.join(sorted(DISCRETISATION))}")
+        values = {"h": min(axes["h"]), "k": min(axes["k"]), "order": max(axes["order"]), "scheme": axes["scheme"][0]}
+        values |= spec
+        for name in ("h", "k"):
+            if name in spec:
+                try:
+                    values[name] = float(spec[name])
+                except (TypeError, ValueError):
+                    raise ParameterError(f"reference: {name} = {spec[name]!r} is not a number") from None
+        ref = RunReference(cases, values, listed=True, describe=json.dumps(values, sort_keys=True, default=str))
+        for c in ref.cases():
+            scene.with_(**c.values())  # checked before any work
+        return ref
+    return SolutionReference(lambda _scene: spec, describe=type(spec).__name__)

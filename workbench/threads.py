@@ -1,0 +1,50 @@
+"""Thread pools: one BLAS thread while workbench computes, NGSolve's TaskManager only when asked.
+
+NGSolve's wheel, NumPy and SciPy each load their own OpenBLAS, each with a pool of
+threads; next to NGSolve's own task manager they oversubscribe a small machine
+(measured: one whole-process run in six to eight took 3-9x longer on two idle
+cores, the time spent spinning in a banded Cholesky of 1458 unknowns). Every
+solve in workbench is either a sparse factorisation, a back-substitution or a
+small dense solve, none of which gains from BLAS threads at these sizes, so a run
+holds every BLAS pool at one thread while it computes and restores them after
+(a notebook's own NumPy work keeps its threads).
+
+Examples
+--------
+>>> from threadpoolctl import threadpool_info
+>>> with blas_single_threaded():
+...     all(p["num_threads"] == 1 for p in threadpool_info() if p["user_api"] == "blas")
+True
+"""
+from __future__ import annotations
+
+import contextlib
+
+
+@contextlib.contextmanager
+def blas_single_threaded():
+    """Hold every loaded BLAS pool (NumPy's, SciPy's, NGSolve's OpenBLAS) at one thread inside the block."""
+    from threadpoolctl import threadpool_limits
+
+    with threadpool_limits(limits=1, user_api="blas"):
+        yield
+
+
+class task_manager:
+    """NGSolve's TaskManager with ``n`` threads inside the block, or nothing for n in (None, 1)."""
+
+    def __init__(self, n: int | None):
+        self.n, self.tm = n, None
+
+    def __enter__(self):
+        if self.n and self.n > 1:
+            import ngsolve as ngs
+
+            ngs.SetNumThreads(int(self.n))
+            self.tm = ngs.TaskManager()
+            self.tm.__enter__()
+        return self
+
+    def __exit__(self, *exc):
+        if self.tm is not None:
+            self.tm.__exit__(*exc)
