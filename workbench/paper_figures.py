@@ -35,14 +35,10 @@ from __future__ import annotations
 import math
 from pathlib import Path
 
-import matplotlib
+import numpy as np
+from matplotlib.tri import Triangulation
 
-matplotlib.use("Agg", force=False)
-import matplotlib.pyplot as plt  # noqa: E402
-import numpy as np  # noqa: E402
-from matplotlib.tri import Triangulation  # noqa: E402
-
-from .plotting import _save  # noqa: E402 - one way to write a figure
+from .plotting import FIELD_CMAP, _save, figure
 
 #: Paper figure numbers of each problem's figure kinds (used in titles and by :func:`paper_figures`).
 FIGURE_NUMBERS = {
@@ -106,7 +102,7 @@ def rod_displacement_field(ds, ref=None, path=None, ref_label="reference"):
     x = ds.vertex_x.values
     order = np.argsort(x)
     ncols = 1 if ref is None else 2
-    fig, axes = plt.subplots(1, ncols, figsize=(5.2 * ncols, 3.8), constrained_layout=True, squeeze=False)
+    fig, axes = figure(1, ncols, figsize=(5.2 * ncols, 3.8), squeeze=False)
     emax = 0.0
     for i, t in enumerate(ds.snapshot_time.values):
         u = ds.u_nodes.isel(snapshot=i, component=0).values
@@ -147,7 +143,7 @@ def rod_displacement_evolution(ds, ref=None, path=None, ref_label="reference"):
     xs = ds.probe_x.values
     uh = ds.u_probe.isel(component=0).values  # (time, probe)
     ncols = 1 if ref is None else 2
-    fig, axes = plt.subplots(1, ncols, figsize=(5.2 * ncols, 3.8), constrained_layout=True, squeeze=False)
+    fig, axes = figure(1, ncols, figsize=(5.2 * ncols, 3.8), squeeze=False)
     for p, x in enumerate(xs):
         axes[0, 0].plot(t, uh[:, p], label=f"x = {x:g}")
     axes[0, 0].set(xlabel="t [s]", ylabel="u_h(x, t) [m]")
@@ -216,7 +212,7 @@ def rod_bonding(ds, ref=None, path=None, ref_label="reference", shade_compressio
     t = ds.time.values
     b = ds.beta.isel(facet=-1).values
     ncols = 1 if ref is None else 2
-    fig, axes = plt.subplots(1, ncols, figsize=(5.2 * ncols, 3.8), constrained_layout=True, squeeze=False)
+    fig, axes = figure(1, ncols, figsize=(5.2 * ncols, 3.8), squeeze=False)
     ax = axes[0, 0]
     ax.plot(t, b, color="tab:blue", label="beta_h(1, t)")
     intervals = compression_intervals(ds)
@@ -294,7 +290,7 @@ def slab_deformed_mesh(ds, path=None, snapshot=-1, scale=None):
     scale = magnification(ds, snapshot) if scale is None else float(scale)
     x, y, xd, yd, tris = _deformed(ds, snapshot, scale)
     t = float(ds.snapshot_time[snapshot])
-    fig, ax = plt.subplots(figsize=(8, 3.2), constrained_layout=True)
+    fig, ax = figure(figsize=(8, 3.2))
     ax.triplot(Triangulation(x, y, tris), color="0.75", lw=0.3)
     ax.triplot(Triangulation(xd, yd, tris), color="tab:blue", lw=0.4)
     ax.set_aspect("equal")
@@ -305,7 +301,7 @@ def slab_deformed_mesh(ds, path=None, snapshot=-1, scale=None):
     return _save(fig, path)
 
 
-def slab_von_mises(ds, path=None, snapshot=-1, scale=None, cmap="jet"):
+def slab_von_mises(ds, path=None, snapshot=-1, scale=None, cmap=FIELD_CMAP):
     """The von Mises norm of the P0 stress on the deformed configuration (``tripcolor``, one value per cell).
 
     Parameters
@@ -329,7 +325,7 @@ def slab_von_mises(ds, path=None, snapshot=-1, scale=None, cmap="jet"):
     _, _, xd, yd, tris = _deformed(ds, snapshot, scale)
     vm = ds.von_mises.isel(snapshot=snapshot).values
     t = float(ds.snapshot_time[snapshot])
-    fig, ax = plt.subplots(figsize=(8, 3.2), constrained_layout=True)
+    fig, ax = figure(figsize=(8, 3.2))
     pc = ax.tripcolor(Triangulation(xd, yd, tris), facecolors=vm, cmap=cmap, shading="flat")
     fig.colorbar(pc, ax=ax, label="|sigma|_vM [Pa]", shrink=0.8)
     ax.set_aspect("equal")
@@ -360,7 +356,7 @@ def slab_contact_displacement(ds, path=None, times=(0.1, 0.4, 0.7, 1.0), points=
     nx = ds.node_x.values
     order = np.argsort(nx)
     uy = ds.u_contact.sel(component="y").values  # (time, node)
-    fig, axes = plt.subplots(1, 2, figsize=(10.4, 3.8), constrained_layout=True)
+    fig, axes = figure(1, 2, figsize=(10.4, 3.8))
     for t in times:
         i = _nearest(tt, t)
         axes[0].plot(nx[order], uy[i, order], label=f"t = {tt[i]:.3g}")
@@ -391,7 +387,7 @@ def slab_bonding(ds, path=None, times=(0.4, 0.6, 0.8, 1.0)):
     fx = ds.facet_x.values
     order = np.argsort(fx)
     b = ds.beta.values  # (time, facet)
-    fig, axes = plt.subplots(1, 2, figsize=(10.4, 3.8), constrained_layout=True)
+    fig, axes = figure(1, 2, figsize=(10.4, 3.8))
     for t in times:
         i = _nearest(tt, t)
         axes[0].plot(fx[order], b[i, order], drawstyle="steps-mid", label=f"t = {tt[i]:.3g}")

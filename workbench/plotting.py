@@ -1,25 +1,43 @@
 """Plots from result Datasets (no re-running inside plotting).
 
 Every function takes Datasets and returns a matplotlib Figure; with a path it
-also writes the figure (PNG, 150 dpi) and closes it.
+also writes the figure (PNG, 150 dpi, atomically). Figures are made as
+``matplotlib.figure.Figure`` objects, not through pyplot, so this module
+chooses no backend and keeps no global state: in Jupyter the returned figure
+shows inline (as the cell's value, or with ``display(fig)``); a script saves it.
 """
 from __future__ import annotations
 
-from pathlib import Path
-
-import matplotlib
 import matplotlib.ticker
+import numpy as np
+from matplotlib.figure import Figure
 
-matplotlib.use("Agg", force=False)
-import matplotlib.pyplot as plt  # noqa: E402
-import numpy as np  # noqa: E402
+#: A perceptually uniform colour map for fields (not jet).
+FIELD_CMAP = "viridis"
+
+
+class _Figure(Figure):
+    """A Figure that shows itself in Jupyter as PNG (``_repr_png_``), whether or not pyplot was ever used."""
+
+    def _repr_png_(self):
+        import io
+
+        buf = io.BytesIO()
+        self.savefig(buf, format="png", dpi=100, bbox_inches="tight")
+        return buf.getvalue()
+
+
+def figure(nrows=1, ncols=1, *, figsize=(5, 3.8), squeeze=True, **kw):
+    """(Figure, axes) with constrained layout, outside pyplot."""
+    fig = _Figure(figsize=figsize, layout="constrained")
+    return fig, fig.subplots(nrows, ncols, squeeze=squeeze, **kw)
 
 
 def _save(fig, path):
     if path is not None:
-        Path(path).parent.mkdir(parents=True, exist_ok=True)
-        fig.savefig(path, dpi=150, bbox_inches="tight")
-        plt.close(fig)
+        from .files import atomic_write
+
+        atomic_write(path, lambda tmp: fig.savefig(tmp, format="png", dpi=150, bbox_inches="tight"))
     return fig
 
 
@@ -31,7 +49,7 @@ def overview(ds, path=None):
     """Probe displacements over time, beta at the facet nearest the far end, u_nu on the contact side at T."""
     has_beta = "beta" in ds
     ncols = 2 + (ds.sizes.get("node", 0) > 1)
-    fig, axes = plt.subplots(1, ncols, figsize=(4.2 * ncols, 3.4), constrained_layout=True)
+    fig, axes = figure(1, ncols, figsize=(4.2 * ncols, 3.4))
     ax = axes[0]
     comp = ds.component.values[-1]  # vertical (normal) component in 2D/3D, x in 1D
     for p in ds.probe.values:
@@ -70,7 +88,7 @@ def convergence(study_ds, path=None, norms=("error", "error_V", "error_Q", "erro
     else:
         along, x = "k", study_ds.k.values
     norms = [n for n in norms if n in study_ds and np.isfinite(study_ds[n].values).any()]
-    fig, axes = plt.subplots(1, len(norms), figsize=(3.6 * len(norms), 3.4), constrained_layout=True, squeeze=False)
+    fig, axes = figure(1, len(norms), figsize=(3.6 * len(norms), 3.4), squeeze=False)
     for ax, norm in zip(axes[0], norms):
         for order in study_ds.order.values:
             for scheme in study_ds.scheme.values:
@@ -100,7 +118,7 @@ def pareto(study_ds, path=None, error="error", cost="wall_time"):
     ok = np.isfinite(err) & np.isfinite(c)
     front = np.array([ok[i] and not np.any(ok & (err <= err[i]) & (c <= c[i]) & ((err < err[i]) | (c < c[i])))
                       for i in range(err.size)])
-    fig, ax = plt.subplots(figsize=(5, 3.8), constrained_layout=True)
+    fig, ax = figure(figsize=(5, 3.8))
     stacked = study_ds[error].stack(case=study_ds[error].dims)
     labels = [", ".join(f"{d}={v}" for d, v in zip(stacked.indexes["case"].names, idx)) for idx in stacked.indexes["case"]]
     ax.loglog(c[ok], err[ok], "o", color="tab:blue", alpha=0.6)

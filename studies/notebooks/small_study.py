@@ -41,10 +41,13 @@ plotting.convergence(ds)
 # The slab (tp5), coupled k = 0.2 h, P1 and P2, in two worker processes.
 
 # %%
-if __name__ == "__main__":  # worker processes are spawned: guard the sweep when run as a script
-    slab = Study("tp5", h=[0.05, 0.025] if SMALL else [0.05, 0.025, 0.0125, 0.00625], k_over_h=0.2,
-                 order=[1, 2], T=0.2 if SMALL else 1.0, n_compare=4)
-    sds = slab.run(progress=False)
-    plotting.convergence(sds)
-    plotting.pareto(sds)
-    print(slab.cheapest(float(sds.error.max())))
+slab = Study("tp5", h=[0.05, 0.025] if SMALL else [0.05, 0.025, 0.0125, 0.00625], k_over_h=0.2,
+             order=[1, 2], T=0.2 if SMALL else 1.0, n_compare=4)
+sds = slab.run(progress=False)
+plotting.convergence(sds)
+
+# %%
+plotting.pareto(sds)
+
+# %%
+slab.cheapest(float(sds.error.max()))
