@@ -207,7 +207,13 @@ def build_parser() -> argparse.ArgumentParser:
 
 
 def main(argv=None) -> int:
+    import shlex
+
+    from .results import invocation
+
+    argv = sys.argv[1:] if argv is None else list(argv)
     args = build_parser().parse_args(argv)
+    invocation.set(shlex.join(["workbench"] + argv))
     try:
         return args.func(args)
     except ParameterError as err:

@@ -52,14 +52,23 @@ ROD_KINDS = ("displacement", "evolution", "bonding")
 SLAB_KINDS = ("deformed_mesh", "von_mises", "contact_displacement", "bonding")
 
 
+#: What a reader of a figure must know about the paper's own version of it (docs/choices.md).
+PAPER_REMARKS = {
+    "tp2": "the paper's curves (u(1, 1) ~ -0.107) disagree with the reduced ODE (-0.0939) shown here; "
+           "they match a flipped sign of the adhesive traction",
+}
+
+
 def _title(ds, kind, text):
-    """Figure title: what, scene, discretisation, and the paper figure it corresponds to."""
+    """Figure title: what, scene, discretisation, the paper figure it corresponds to, and any remark on it."""
     scene = ds.attrs.get("scene", "?")
-    fig_no = FIGURE_NUMBERS.get(ds.attrs.get("base_scene", scene), {}).get(kind)
+    base = ds.attrs.get("base_scene", scene)
+    fig_no = FIGURE_NUMBERS.get(base, {}).get(kind)
     paper = f" (cf. paper Fig. {fig_no})" if fig_no else ""
     h, k = ds.attrs.get("h_max", float("nan")), ds.attrs.get("k_actual", float("nan"))
     status = "" if ds.attrs.get("status", "complete") == "complete" else "  [INCOMPLETE RUN]"
-    return f"{scene}: {text}{paper}\nh = {h:.3g}, k = {k:.3g}{status}"
+    remark = f"\nnote: {PAPER_REMARKS[base]}" if fig_no and base in PAPER_REMARKS else ""
+    return f"{scene}: {text}{paper}\nh = {h:.3g}, k = {k:.3g}{status}{remark}"
 
 
 def _nearest(values, wanted):
@@ -263,6 +272,12 @@ def magnification(ds, snapshot=-1, fraction=0.25):
     return nice_scale(fraction * size / umax) if umax > 0 else 1.0
 
 
+def _note(ax, text):
+    """A note under the axes (outside the data, which fills the body's whole box)."""
+    ax.annotate(text, xy=(0.0, 0.0), xycoords="axes fraction", xytext=(0, -30), textcoords="offset points",
+                va="top", ha="left", fontsize=8, annotation_clip=False)
+
+
 def _deformed(ds, snapshot, scale):
     x, y = ds.vertex_x.values, ds.vertex_y.values
     u = ds.u_nodes.isel(snapshot=snapshot).values
@@ -295,8 +310,7 @@ def slab_deformed_mesh(ds, path=None, snapshot=-1, scale=None):
     ax.triplot(Triangulation(xd, yd, tris), color="tab:blue", lw=0.4)
     ax.set_aspect("equal")
     ax.set(xlabel="x [m]", ylabel="y [m]")
-    ax.text(0.01, 0.98, f"displacement magnified x {scale:g}\ngrey: reference configuration",
-            transform=ax.transAxes, va="top", fontsize=8, bbox=dict(fc="white", alpha=0.8, lw=0))
+    _note(ax, f"displacement magnified x {scale:g}; grey: reference configuration")
     fig.suptitle(_title(ds, "deformed_mesh", f"deformed mesh at t = {t:g} s (x {scale:g})"), fontsize=9)
     return _save(fig, path)
 
@@ -314,7 +328,7 @@ def slab_von_mises(ds, path=None, snapshot=-1, scale=None, cmap=FIELD_CMAP):
     scale : float, optional
         Displacement magnification of the configuration; default :func:`magnification`.
     cmap : str
-        Colour map (the paper's figures use a rainbow map).
+        Colour map (default perceptually uniform; the paper's figures use a rainbow map).
 
     Returns
     -------
@@ -333,8 +347,7 @@ def slab_von_mises(ds, path=None, snapshot=-1, scale=None, cmap=FIELD_CMAP):
     i = int(np.argmax(vm))
     cx, cy = xd[tris[i]].mean(), yd[tris[i]].mean()
     ax.plot(cx, cy, "w*", ms=10, mec="k")
-    ax.text(0.01, 0.98, f"displacement magnified x {scale:g}\nmax {vm[i]:.4g} Pa (star)",
-            transform=ax.transAxes, va="top", fontsize=8, bbox=dict(fc="white", alpha=0.8, lw=0))
+    _note(ax, f"displacement magnified x {scale:g}; max {vm[i]:.4g} Pa at the star")
     fig.suptitle(_title(ds, "von_mises", f"von Mises norm of sigma at t = {t:g} s, deformed configuration"),
                  fontsize=9)
     return _save(fig, path)

@@ -8,6 +8,7 @@ shows inline (as the cell's value, or with ``display(fig)``); a script saves it.
 """
 from __future__ import annotations
 
+import matplotlib.colors
 import matplotlib.ticker
 import numpy as np
 from matplotlib.figure import Figure
@@ -46,64 +47,118 @@ def _probe_label(ds, p):
 
 
 def overview(ds, path=None):
-    """Probe displacements over time, beta at the facet nearest the far end, u_nu on the contact side at T."""
-    has_beta = "beta" in ds
-    ncols = 2 + (ds.sizes.get("node", 0) > 1)
-    fig, axes = figure(1, ncols, figsize=(4.2 * ncols, 3.4))
-    ax = axes[0]
+    """A run at a glance: probe displacements over time, then what the model has on its contact side.
+
+    Model A: the bonding field at the far facet over time (if adhesion is modelled) and the
+    normal displacement along the contact side at four times. Model B: the contact pressure
+    and the normal displacement along the contact side (gap drawn) at four times, and the
+    contact states of every node over time (the rod: pressure and state over time).
+    """
     comp = ds.component.values[-1]  # vertical (normal) component in 2D/3D, x in 1D
-    for p in ds.probe.values:
-        ax.plot(ds.time, ds.u_probe.sel(probe=p, component=comp), label=_probe_label(ds, p))
-    ax.set(xlabel="t [s]", ylabel=f"u_{comp} [m]", title="displacement at probes")
-    ax.legend(fontsize=7)
-    ax = axes[1]
-    if has_beta:
-        far = int(np.argmax(ds.facet_x.values))
-        ax.plot(ds.time, ds.beta.isel(facet=far))
-        ax.set(xlabel="t [s]", ylabel="beta", title=f"bonding field at x = {float(ds.facet_x[far]):.3g}")
-    else:
-        ax.text(0.5, 0.5, "no adhesion modelled", ha="center", va="center", transform=ax.transAxes)
-        ax.set_axis_off()
-    if ncols == 3:
-        ax = axes[2]
-        order = np.argsort(ds.node_x.values)
-        for t in np.unique(np.quantile(ds.time.values, [0.25, 0.5, 0.75, 1.0], method="nearest")):
-            ax.plot(ds.node_x.values[order], ds.u_contact.sel(time=t, component=comp).values[order],
-                    label=f"t = {t:.3g}")
-        ax.set(xlabel="x [m]", ylabel=f"u_{comp} [m]", title="contact side")
-        ax.legend(fontsize=7)
+    model_b = "contact_state" in ds
+    along_side = ds.sizes.get("node", 0) > 1
+    panels = ["probes"]
+    if "beta" in ds:
+        panels.append("beta")
+    if model_b:
+        panels += ["pressure", "u_contact", "states"] if along_side else ["pressure_t"]
+    elif along_side:
+        panels.append("u_contact")
+    fig, axes = figure(1, len(panels), figsize=(4.2 * len(panels), 3.4), squeeze=False)
+    times = np.unique(np.quantile(ds.time.values, [0.25, 0.5, 0.75, 1.0], method="nearest"))
+    order = np.argsort(ds.node_x.values)
+    x_nodes = ds.node_x.values[order]
+    for ax, panel in zip(axes[0], panels):
+        if panel == "probes":
+            for p in ds.probe.values:
+                ax.plot(ds.time, ds.u_probe.sel(probe=p, component=comp), label=_probe_label(ds, p))
+            ax.set(xlabel="t [s]", ylabel=f"u_{comp} [m]", title="displacement at probes")
+            ax.legend(fontsize=7)
+        elif panel == "beta":
+            from .results import far_facet
+
+            far = far_facet(ds.beta)
+            ax.plot(ds.time, far)
+            ax.set(xlabel="t [s]", ylabel="beta [1]", title=f"bonding field at x = {float(far.facet_x):.3g}")
+        elif panel == "u_contact":
+            for t in times:
+                ax.plot(x_nodes, ds.u_contact.sel(time=t, component=comp).values[order], label=f"t = {t:.3g}")
+            if model_b:  # u_nu = -u_y (2D) / -u_z (3D) reaches the rigid layer at -gap
+                ax.axhline(-float(ds.attrs["gap"]), color="0.5", ls="--", lw=0.8, label="rigid limit")
+            ax.set(xlabel="x [m]", ylabel=f"u_{comp} [m]", title="contact side")
+            ax.legend(fontsize=7)
+        elif panel == "pressure":
+            for t in times:
+                ax.plot(x_nodes, ds.contact_pressure.sel(time=t).values[order], label=f"t = {t:.3g}")
+            ax.set(xlabel="x [m]", ylabel="contact pressure [Pa]", title="contact pressure")
+            ax.legend(fontsize=7)
+        elif panel == "states":
+            st = ds.contact_state.values[:, order].astype(float)
+            st[st < 0] = np.nan
+            cmap = matplotlib.colors.ListedColormap(["#dddddd", "#4c72b0", "#55a868", "#c44e52"])
+            im = ax.pcolormesh(x_nodes, ds.time.values, st, cmap=cmap, vmin=-0.5, vmax=3.5, shading="nearest")
+            cb = fig.colorbar(im, ax=ax, ticks=[0, 1, 2, 3])
+            cb.ax.set_yticklabels(["separated", "stuck", "compliant", "rigid"], fontsize=7)
+            ax.set(xlabel="x [m]", ylabel="t [s]", title="contact states")
+        elif panel == "pressure_t":
+            ax.plot(ds.time, ds.contact_pressure.isel(node=-1), color="k", lw=1)
+            states = ds.contact_state.isel(node=-1).values
+            for code, colour, name in ((1, "#4c72b0", "stuck"), (2, "#55a868", "compliant"), (3, "#c44e52", "rigid")):
+                on = states == code
+                if on.any():
+                    ax.fill_between(ds.time, 0, 1, where=on, color=colour, alpha=0.25, lw=0, label=name,
+                                    transform=ax.get_xaxis_transform())
+            ax.set(xlabel="t [s]", ylabel="contact pressure [Pa]", title="contact end: pressure and state")
+            ax.legend(fontsize=7)
     status = "" if ds.attrs.get("status") == "complete" else "  [INCOMPLETE]"
     fig.suptitle(f"{ds.attrs.get('scene')}: scheme {ds.attrs.get('scheme')}, h = {ds.attrs.get('h_max'):.3g}, "
                  f"k = {ds.attrs.get('k_actual'):.3g}{status}", fontsize=9)
     return _save(fig, path)
 
 
+def _series(study_ds):
+    """(along, x, series dims, other dims) of a study Dataset's convergence plot."""
+    if "level" in study_ds.dims:
+        return "h+k", study_ds.h.values + study_ds.k.values, ["level"], None
+    along = "h" if study_ds.sizes.get("h", 1) > 1 else "k"
+    return along, study_ds[along].values, [along], {d: -1 for d in ("h", "k") if d != along and d in study_ds.dims}
+
+
+def _combinations(da, skip):
+    """Every selection of ``da`` over its dims except ``skip`` (dicts of dim -> value)."""
+    import itertools
+
+    dims = [d for d in da.dims if d not in skip]
+    for combo in itertools.product(*(da[d].values for d in dims)):
+        yield dict(zip(dims, combo))
+
+
+def _label(sel):
+    parts = []
+    for d, v in sel.items():
+        parts.append(f"P{v}" if d == "order" else (str(v) if d == "scheme" else f"{d}={v:g}"
+                                                  if isinstance(v, (float, np.floating)) else f"{d}={v}"))
+    return " ".join(parts)
+
+
 def convergence(study_ds, path=None, norms=("error", "error_V", "error_Q", "error_beta")):
     """Log-log error against h + k (coupled sweeps), h or k, with fitted orders and a slope-1 guide."""
-    coupled = "level" in study_ds.dims
-    if coupled:
-        along, x = "h+k", study_ds.h.values + study_ds.k.values
-    elif study_ds.sizes.get("h", 1) > 1:
-        along, x = "h", study_ds.h.values
-    else:
-        along, x = "k", study_ds.k.values
+    along, x, series, finest = _series(study_ds)
     norms = [n for n in norms if n in study_ds and np.isfinite(study_ds[n].values).any()]
-    fig, axes = figure(1, len(norms), figsize=(3.6 * len(norms), 3.4), squeeze=False)
+    fig, axes = figure(1, len(norms), figsize=(3.8 * len(norms), 3.6), squeeze=False)
     for ax, norm in zip(axes[0], norms):
-        for order in study_ds.order.values:
-            for scheme in study_ds.scheme.values:
-                err = study_ds[norm].sel(order=order, scheme=scheme)
-                if not coupled:
-                    err = err.isel(k=-1) if along == "h" else err.isel(h=-1)
-                y = np.ravel(err.values)
-                good = np.isfinite(y) & (y > 0)
-                if not good.any():
-                    continue
-                rate = float(study_ds.observed_order.sel(norm=norm, along=along, order=order, scheme=scheme))
-                ax.loglog(x[good], y[good], "o-", label=f"P{order} {scheme}: {rate:.2f}")
-                ref = y[good][0] * (x[good] / x[good][0])
-                ax.loglog(x[good], ref, ":", color="gray")
-        ax.set(xlabel=along, title=norm)
+        err_all = study_ds[norm] if finest is None else study_ds[norm].isel(finest)
+        for sel in _combinations(err_all, series):
+            y = np.ravel(err_all.sel(sel).values)
+            good = np.isfinite(y) & (y > 0)
+            if not good.any():
+                continue
+            rate = float(study_ds.observed_order.sel(norm=norm, along=along).sel(sel))
+            ax.loglog(x[good], y[good], "o-", label=f"{_label(sel)}: {rate:.2f}")
+            ax.loglog(x[good], y[good][0] * (x[good] / x[good][0]), ":", color="gray")
+        units = study_ds[norm].attrs.get("units", "")
+        ax.set(xlabel=f"{along} [{'m + s' if along == 'h+k' else ('m' if along == 'h' else 's')}]",
+               ylabel=f"{norm} [{units}]", title=norm)
         ax.xaxis.set_minor_formatter(matplotlib.ticker.NullFormatter())
         ax.legend(fontsize=7, title="fitted order", title_fontsize=7)
     fig.suptitle(f"{study_ds.attrs.get('scene')}: reference {study_ds.attrs.get('reference')} "
@@ -112,23 +167,35 @@ def convergence(study_ds, path=None, norms=("error", "error_V", "error_Q", "erro
 
 
 def pareto(study_ds, path=None, error="error", cost="wall_time"):
-    """Error against cost (wall time incl. setup) of every case, the Pareto front joined."""
-    err = study_ds[error].values.ravel()
-    c = (study_ds[cost] + (study_ds["setup_time"] if cost == "wall_time" else 0)).values.ravel()
+    """Error against cost (wall time incl. setup) of every case; the Pareto front (``study_ds.pareto``) joined and
+    numbered, the numbers explained beside the plot."""
+    err_da = study_ds[error]
+    c_da = study_ds[cost] + (study_ds["setup_time"] if cost == "wall_time" else 0)
+    front_da = study_ds["pareto"] if error == "error" and "pareto" in study_ds else None
+    stacked = err_da.stack(case=err_da.dims)
+    err, c = stacked.values, c_da.stack(case=err_da.dims).values
     ok = np.isfinite(err) & np.isfinite(c)
-    front = np.array([ok[i] and not np.any(ok & (err <= err[i]) & (c <= c[i]) & ((err < err[i]) | (c < c[i])))
-                      for i in range(err.size)])
-    fig, ax = figure(figsize=(5, 3.8))
-    stacked = study_ds[error].stack(case=study_ds[error].dims)
-    labels = [", ".join(f"{d}={v}" for d, v in zip(stacked.indexes["case"].names, idx)) for idx in stacked.indexes["case"]]
-    ax.loglog(c[ok], err[ok], "o", color="tab:blue", alpha=0.6)
-    order = np.argsort(c[front & ok])
-    ax.loglog(c[front & ok][order], err[front & ok][order], "-", color="tab:red", label="Pareto front")
-    for ci, ei, lab, f in zip(c, err, labels, front):
-        if f and np.isfinite(ci) and np.isfinite(ei):
-            ax.annotate(lab, (ci, ei), fontsize=6)
-    label = study_ds[error].attrs.get("long_name", error)
-    ax.set(xlabel=f"{cost} + setup [s]", ylabel=error, title=f"{study_ds.attrs.get('scene')}: accuracy vs cost")
-    ax.text(0.02, 0.02, label, transform=ax.transAxes, fontsize=6)
-    ax.legend(fontsize=7)
+    if front_da is not None:
+        front = front_da.stack(case=err_da.dims).values.astype(bool) & ok
+    else:
+        from .study.evaluate import pareto_front
+
+        front = pareto_front(err, c).astype(bool) & ok
+    fig, ax = figure(figsize=(7.5, 3.8))
+    ax.loglog(c[ok], err[ok], "o", color="tab:blue", alpha=0.5, label="cases")
+    idx = np.nonzero(front)[0][np.argsort(c[front])]
+    ax.loglog(c[idx], err[idx], "-o", color="tab:red", label="Pareto front")
+    lines = []
+    names = stacked.indexes["case"].names
+    for n, i in enumerate(idx, start=1):
+        ax.annotate(str(n), (c[i], err[i]), xytext=(4, 4), textcoords="offset points", fontsize=7, color="tab:red")
+        values = stacked.indexes["case"][i]
+        lines.append(f"{n}: " + ", ".join(f"{d}={v:g}" if isinstance(v, (float, np.floating)) else f"{d}={v}"
+                                          for d, v in zip(names, values) if study_ds.sizes.get(d, 1) > 1
+                                          or d in ("h", "k")))
+    units = err_da.attrs.get("units", "")
+    ax.set(xlabel=f"{cost} + setup [s]" if cost == "wall_time" else f"{cost} [s]", ylabel=f"{error} [{units}]",
+           title=f"{study_ds.attrs.get('scene')}: accuracy vs cost")
+    ax.legend(fontsize=7, loc="lower left")
+    ax.text(1.02, 1.0, "\n".join(lines), transform=ax.transAxes, va="top", fontsize=7, family="monospace")
     return _save(fig, path)

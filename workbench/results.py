@@ -23,6 +23,7 @@ schema stores only str, int, float.
 """
 from __future__ import annotations
 
+import contextvars
 import json
 import time as _time
 from datetime import datetime, timezone
@@ -62,6 +63,11 @@ VARIABLES = {
     "complementarity": ("m", "max over contact nodes of |s - prox(s + rho lam / w)|"),
     "contact_pressure": ("Pa", "contact pressure -sigma_nu at the contact vertices (lumped)"),
     "contact_state": ("1", "contact state: -1 clamped, 0 separated, 1 stuck, 2 compliant, 3 rigid"),
+    "component": ("1", "displacement component"),
+    "probe": ("1", "probe index"),
+    "node": ("1", "contact-boundary vertex index"),
+    "facet": ("1", "contact facet index"),
+    "stress_component": ("1", "stress tensor component"),
     "probe_x": ("m", "probe x"), "probe_y": ("m", "probe y"), "probe_z": ("m", "probe z"),
     "node_x": ("m", "contact vertex x"), "node_y": ("m", "contact vertex y"), "node_z": ("m", "contact vertex z"),
     "facet_x": ("m", "contact facet midpoint x"), "facet_y": ("m", "contact facet midpoint y"),
@@ -170,9 +176,9 @@ class Recorder:
         coords = {
             "time": _var("time", self.times[steps], "time"),
             "step": _var("time", steps, "step"),
-            "component": ("component", comp),
-            "probe": ("probe", np.arange(len(probes))),
-            "node": ("node", np.arange(len(d.node_dofs))),
+            "component": _var("component", comp, "component"),
+            "probe": _var("probe", np.arange(len(probes)), "probe"),
+            "node": _var("node", np.arange(len(d.node_dofs)), "node"),
         }
         for c in range(dim):
             coords[f"probe_{COMPONENTS[c]}"] = _var("probe", probes[:, c], f"probe_{COMPONENTS[c]}")
@@ -182,7 +188,7 @@ class Recorder:
             "u_contact": _var(("time", "node", "component"), self.u_contact[:n], "u_contact"),
         }
         if self.beta is not None:
-            coords["facet"] = ("facet", np.arange(self.beta.shape[1]))
+            coords["facet"] = _var("facet", np.arange(self.beta.shape[1]), "facet")
             for c in range(2 if dim == 3 else 1):  # facets lie on y = 0 (2D) or z = 0 (3D)
                 coords[f"facet_{COMPONENTS[c]}"] = _var("facet", d.facet_xyz[:, c], f"facet_{COMPONENTS[c]}")
             data["beta"] = _var(("time", "facet"), self.beta[:n], "beta")
@@ -192,7 +198,7 @@ class Recorder:
             data[key] = _var(("time", "node"), arr[:n], key)
         if self.snaps:
             coords["snapshot_time"] = _var("snapshot", np.array([s[0] for s in self.snaps]), "snapshot_time")
-            coords["stress_component"] = ("stress_component", list(STRESS_COMPONENTS[dim]))
+            coords["stress_component"] = _var("stress_component", list(STRESS_COMPONENTS[dim]), "stress_component")
             vxyz = d.vertex_xyz
             for c in range(dim):
                 coords[f"vertex_{COMPONENTS[c]}"] = _var("vertex", vxyz[:, c], f"vertex_{COMPONENTS[c]}")
@@ -233,16 +239,32 @@ def _cells(mesh, dim):
     return np.array(elems["nodes"][:, : dim + 1], dtype=np.int64) - 1
 
 
-def provenance(scene, extra: dict) -> dict:
-    """Dataset attributes: every scene parameter, discretisation, cost and versions."""
-    attrs = {"scene": scene.name, "base_scene": scene.base, "geometry": scene.geometry,
+#: The command or call that is making the current result (set by the command line; else the Python call).
+invocation: contextvars.ContextVar = contextvars.ContextVar("invocation", default=None)
+
+#: Units of the non-parameter attributes a run writes.
+ATTR_UNITS = {"h_max": "m", "k_actual": "s", "k_crit": "s", "setup_time": "s", "wall_time": "s", "cpu_time": "s",
+              "ndof": "1", "nsteps": "1", "threads": "1", "memory_peak_mb": "MB"}
+
+
+def provenance(scene, extra: dict, call: str = "") -> dict:
+    """Dataset attributes: CF conventions, every scene parameter with its units (``NAME_units``), the
+    discretisation, cost, versions and a ``history`` line with the full command or call."""
+    from .parameters import PARAMETERS
+
+    attrs = {"Conventions": "CF-1.10", "title": f"workbench run of scene {scene.name}: {scene.description}",
+             "scene": scene.name, "base_scene": scene.base, "geometry": scene.geometry,
              "description": scene.description, "model": scene.model, "terms": ",".join(scene.terms) or "none"}
     attrs |= {k: attr_value(v) for k, v in scene.values.items()}
     attrs["parameters_json"] = json.dumps(scene.plain(), sort_keys=True)
     attrs |= {k: attr_value(v) for k, v in extra.items()}
+    for k in list(scene.values) + list(extra):
+        unit = PARAMETERS[k].unit if k in PARAMETERS else ATTR_UNITS.get(k)
+        if unit:
+            attrs[f"{k}_units"] = unit
     attrs |= versions()
     stamp = datetime.now(timezone.utc).strftime("%Y-%m-%dT%H:%M:%SZ")
-    attrs["history"] = f"{stamp} workbench run {scene.name}"
+    attrs["history"] = f"{stamp} {invocation.get() or call or 'workbench.run(' + repr(scene.name) + ')'}"
     return attrs
 
 

@@ -110,7 +110,7 @@ PRESETS: dict[str, Preset] = {
     "slab": Preset("slab", "2D plane-stress slab (0, width) x (0, height), clamped at x = 0, adhesive contact on y = 0",
                    dict(h=0.0125, k=0.001, traction_top="(0, t)")),
     "block": Preset("block", "3D block (0, width) x (0, depth) x (0, height), clamped at x = 0, adhesive contact on z = 0",
-                    dict(h=0.05, k=0.001, traction_top="(0, 0, t)")),
+                    dict(h=0.05, order=2, k=0.001, traction_top="(0, 0, t)")),  # P1 locks: tip 50 % low at h = 0.05
     "tp1": Preset("rod", "Paper test problem 1: rod end held at -0.6, case (b) A + delta < -L; exact solution (SPEC)",
                   dict(_ROD_PAPER, gamma_nu=0.3, L=0.3, delta="-0.6", u0="-0.6")),
     "tp2": Preset("rod", "Paper test problem 2: rod end held at -0.1, case (a) -L <= A + delta < 0; reduced ODE reference",

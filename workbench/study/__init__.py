@@ -236,6 +236,7 @@ class Study:
         swept = set(self.axes) | set(self.coupled)
         ref_case = self.ref_case
         ds.attrs = {
+            "Conventions": "CF-1.10", "title": f"workbench study of scene {self.scene.name}",
             "scene": self.scene.name, "geometry": self.scene.geometry, "model": self.scene.model,
             "reference": ref.describe() if ref is not None else "none",
             "reference_case": ref_case.key if ref_case is not None else "",
@@ -245,7 +246,7 @@ class Study:
             "axes": ",".join(self.axes),
             "parameters_json": canonical(self.scene.plain()),
             "cases_total_wall_time": float(np.nansum(ds["wall_time"]) + np.nansum(ds["setup_time"])),
-            "history": f"workbench study {self.scene.name}",
+            "history": _history(self),
         } | {k: attr_value(v) for k, v in self.scene.values.items() if k not in swept}
         return ds
 
@@ -276,6 +277,16 @@ class Study:
     def cheapest(self, tolerance: float, *, error: str = "error", cost: str = "wall_time"):
         """The cheapest case whose ``error`` is <= ``tolerance`` (None if none reaches it)."""
         return cheapest(self.dataset, tolerance, error=error, cost=cost)
+
+
+def _history(study) -> str:
+    from datetime import datetime, timezone
+
+    from ..results import invocation
+
+    stamp = datetime.now(timezone.utc).strftime("%Y-%m-%dT%H:%M:%SZ")
+    axes = ", ".join(f"{k}={v!r}" for k, v in study.axes.items() if len(v) > 1)
+    return f"{stamp} {invocation.get() or f'workbench.Study({study.scene.name!r}, {axes})'}"
 
 
 def _reference(spec, study):
