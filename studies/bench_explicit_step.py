@@ -20,7 +20,8 @@ import numpy as np
 
 import workbench
 from workbench import discretisation, schemes
-from workbench.run import _threads
+from workbench.threads import blas_single_threaded
+from workbench.threads import task_manager as _threads
 
 
 def scene(nx, solver):
@@ -39,7 +40,7 @@ def per_step(nx, steps, solver="auto", threads=None):
     out = np.zeros(d.ndof)
     solve, step = [], []
     t = 0.0
-    with _threads(threads):
+    with _threads(threads), blas_single_threaded():
         for _ in range(steps):
             a = time.perf_counter()
             sch.solver.solve(rhs, out)

@@ -1,7 +1,7 @@
 """Model B: long memory, unilateral contact with a compliant layer, one variational inequality per step.
 
 References: the rod with memory reduces to a scalar Volterra inequality, solved independently by
-workbench.volterra (Prony kernel -> an ODE for the memory variables, SciPy DOP853 at rtol 1e-10);
+workbench.references.volterra (Prony kernel -> an ODE for the memory variables, SciPy DOP853 at rtol 1e-10);
 the static elastic problem without memory and contact, assembled here from the plane-stress formula;
 the constraint and complementarity conditions themselves.
 """
@@ -10,7 +10,8 @@ import numpy as np
 import pytest
 
 import workbench
-from workbench import ParameterError, volterra
+from workbench import ParameterError
+from workbench.references import volterra
 from workbench.study import Study
 
 ROD = dict(a=1.0, moduli=[0.5], taus=[0.2], delta=lambda t: 0.3 * np.sin(2 * np.pi * t) - 0.05, T=1.0, ell=1.0,

@@ -6,26 +6,20 @@ References (all independent of the scheme under test):
   (paper eq. 7.11 with the exponent typo corrected, SPEC); the paper reports at h = k = 0.01
   a displacement error < 1.8e-4 (Fig. 2) and a bonding error < 4e-6 (Fig. 4).
 * Problem 2: the reduced ODE A' + (1 + 0.1 beta^2) A = 0.01 beta^2, beta' = -0.1 beta (A - 0.1)^2
-  (SPEC, Appendix A), Radau at rtol 1e-11; and, for the paper's curves, the same ODE with the
-  adhesive pull's sign flipped, solved by an independent few-line integrator in the study.
+  (docs/models.md), Radau at rtol 1e-11; and, for the paper's curves, the same ODE with the
+  adhesive pull's sign flipped (workbench.references.rod_ode of the flipped model: scalar formulas,
+  independent of the finite-element code).
 * Problem 3: qualitative (SPEC): beta never increases and, with the tension-only truncation,
   does not change while the rod end is compressed; the ODE of the rod bounds the error.
 * Problems 4–5: no reference; physical checks (beta(1, 0) falls from 1 but stays > 0.9 at T,
   the loaded tip moves with the load, the von Mises maximum sits at the clamp or the load).
 """
-import importlib.util
-from pathlib import Path
-
 import numpy as np
 import pytest
 
 import workbench
 from workbench import vtk
-
-ROOT = Path(__file__).resolve().parent.parent
-_spec = importlib.util.spec_from_file_location("reproduce", ROOT / "studies" / "reproduce.py")
-reproduce = importlib.util.module_from_spec(_spec)
-_spec.loader.exec_module(reproduce)
+from workbench.paper import reproduction as reproduce
 
 #: Reduced sizes: the rod is exact in space (P1, linear solution), so tp1/tp2 keep the paper's
 #: k = h = 0.01 for the paper's error bounds; the slab runs on a coarse mesh.
@@ -136,8 +130,30 @@ def test_main_prints_the_comparison(tmp_path, capsys):
     assert (tmp_path / "tp1_bonding.png").exists()
 
 
+VTK_ID = {"vertex": 1, "line": 3, "triangle": 5, "tetra": 10, "line3": 21, "triangle6": 22, "tetra10": 24}
+
+
+def read_vtu(path) -> dict:
+    """A written .vtu read back by meshio (an independent reader), as plain arrays."""
+    import meshio
+
+    m = meshio.read(path)
+    block = m.cells[0]
+    return {"n_points": len(m.points), "n_cells": len(block.data), "points": m.points,
+            "connectivity": block.data.ravel(), "cell_types": np.full(len(block.data), VTK_ID[block.type]),
+            "point_data": dict(m.point_data), "cell_data": {k: v[0] for k, v in m.cell_data.items()},
+            "field_data": dict(m.field_data)}
+
+
+def read_pvd(path) -> list:
+    """The (time, file name) entries of a .pvd collection."""
+    import xml.etree.ElementTree as ET
+
+    return [(float(d.get("timestep")), d.get("file")) for d in ET.parse(path).getroot().iter("DataSet")]
+
+
 def _check_volume_file(path, ds, i, cell_type):
-    g = vtk.read_vtu(path)
+    g = read_vtu(path)
     nv, nc = ds.sizes["vertex"], ds.sizes["cell"]
     assert g["n_points"] == nv and g["points"].shape == (nv, 3)
     assert g["n_cells"] == nc and np.all(g["cell_types"] == cell_type)
@@ -161,7 +177,7 @@ def test_vtk_export(results, tmp_path, problem, cell_type, facet_type):
     ns = ds.sizes["snapshot"]
     for i in range(ns):
         _check_volume_file(tmp_path / f"{problem}_{i:04d}.vtu", ds, i, cell_type)
-        c = vtk.read_vtu(tmp_path / f"{problem}_contact_{i:04d}.vtu")
+        c = read_vtu(tmp_path / f"{problem}_contact_{i:04d}.vtu")
         assert c["n_cells"] == ds.sizes["facet"] and np.all(c["cell_types"] == facet_type)
         assert c["n_points"] == ds.sizes["node"]
         j = int(np.argmin(np.abs(ds.time.values - float(ds.snapshot_time[i]))))
@@ -169,17 +185,17 @@ def test_vtk_export(results, tmp_path, problem, cell_type, facet_type):
         # each contact cell's midpoint is its beta facet's midpoint
         mids = c["points"][c["connectivity"].reshape(c["n_cells"], -1)].mean(axis=1)
         assert np.allclose(mids[:, 0], ds.facet_x.values)
-    entries = vtk.read_pvd(tmp_path / f"{problem}.pvd")
+    entries = read_pvd(tmp_path / f"{problem}.pvd")
     assert [t for t, _ in entries] == pytest.approx(ds.snapshot_time.values.tolist())
     assert all((tmp_path / name).exists() for _, name in entries)
 
 
 def test_vtk_export_3d(tmp_path):
     """3D: tetrahedra (type 10) and the contact triangles (type 5) matched to the beta facets."""
-    ds = workbench.run("block", h=0.2, T=0.01, k=0.01, progress=False)
+    ds = workbench.run("block", h=0.2, T=0.01, k=0.01, order=1, progress=False)
     files = vtk.export(ds, tmp_path, stem="b")
     _check_volume_file(files[0], ds, 0, 10)
-    c = vtk.read_vtu(tmp_path / "b_contact_0000.vtu")
+    c = read_vtu(tmp_path / "b_contact_0000.vtu")
     assert c["n_cells"] == ds.sizes["facet"] and np.all(c["cell_types"] == 5)
     mids = c["points"][c["connectivity"].reshape(-1, 3)].mean(axis=1)
     assert np.allclose(mids[:, :2], np.column_stack([ds.facet_x.values, ds.facet_y.values]))

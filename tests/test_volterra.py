@@ -1,10 +1,10 @@
-"""Model B reference solver (workbench.volterra): 1D viscoelastic rod with memory in contact."""
+"""Model B reference solver (workbench.references.volterra): 1D viscoelastic rod with memory in contact."""
 import numpy as np
 import pytest
 from scipy.integrate import quad
 from scipy.linalg import expm
 
-from workbench.volterra import (
+from workbench.references.volterra import (
     contact_response,
     richardson,
     solve_prony,

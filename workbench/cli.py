@@ -1,23 +1,48 @@
-"""Command line: ``workbench scenes | show | run`` (and the study/reproduction commands).
+"""Command line: ``workbench scenes | show | run | study | reproduce``.
 
 Examples (shell)::
 
-    workbench study tp1 --k 0.04 0.02 0.01 --reference ode -o out/tp1-k.nc --plot out/tp1-k.png
     workbench scenes
     workbench show tp5
     workbench run tp1 --k 0.005 -o out/tp1.nc --plot out/tp1.png
     workbench run slab --set "traction_top=(0, 2*t)" --set gamma_nu=1 -o out/slab.nc
+    workbench study tp1 --k 0.04 0.02 0.01 --reference ode -o out/tp1-k.nc --plot out/tp1-k.png
+    workbench reproduce all --out out/reproduction
+
+Exit codes: 0 done; 2 a user's mistake (one line ``error: ...`` on stderr, before any
+work); 3 the run diverged (the computed part is kept and marked incomplete); 4 an
+output could not be written at the end (the result is kept elsewhere, and the
+message says where). Warnings are printed as one line ``warning: ...`` each.
 """
 from __future__ import annotations
 
 import argparse
 import sys
+import warnings
 
 import numpy as np
 
-from .parameters import ParameterError
+from .errors import ParameterError
 
-EXIT_BAD_INPUT, EXIT_DIVERGED = 2, 3
+EXIT_BAD_INPUT, EXIT_DIVERGED, EXIT_NOT_WRITTEN = 2, 3, 4
+#: An error line longer than this is cut (an echoed 60 kB expression helps nobody).
+MAX_LINE = 600
+
+
+class _Parser(argparse.ArgumentParser):
+    """argparse, but a usage mistake is one ``error:`` line (and the usage hint) like every other."""
+
+    def error(self, message):
+        raise ParameterError(f"{message} (see: {self.prog} --help)")
+
+
+def _one_line(text: str) -> str:
+    text = " ".join(str(text).split())
+    return text if len(text) <= MAX_LINE else text[: MAX_LINE - 3] + "..."
+
+
+def _show_warning(message, category, filename, lineno, file=None, line=None):
+    print(f"warning: {_one_line(message)}", file=sys.stderr)
 
 
 def _overrides(args, swept=()) -> dict:
@@ -47,15 +72,50 @@ def _overrides(args, swept=()) -> dict:
     return out
 
 
-def _add_scene_args(p, run_options=True):
-    p.add_argument("scene", help="built-in scene name (see 'workbench scenes') or a .toml scene file")
-    p.add_argument("--set", action="append", metavar="NAME=VALUE", help="override a parameter (repeatable)")
-    if run_options:
-        p.add_argument("--h", type=float, help="element size")
-        p.add_argument("--k", type=float, help="time step")
-        p.add_argument("--T", type=float, help="final time")
-        p.add_argument("--order", type=int, help="polynomial order of the displacement")
-        p.add_argument("--scheme", help="time scheme")
+def _check_outputs(args, *, cases=None) -> None:
+    """Every output target is checked before any work (a bad path would lose the whole run)."""
+    from .files import check_output
+
+    if getattr(args, "output", None):
+        check_output(args.output, "-o")
+        if cases:
+            check_output(args.output + ".cases", "-o (its case folder)", folder=True)
+    for option, folder in (("plot", False), ("pareto", False), ("vtk", True)):
+        value = getattr(args, option, None)
+        if value:
+            check_output(value, f"--{option}", folder=folder)
+
+
+def _threads(value):
+    if value is not None and value < 1:
+        raise ParameterError(f"--threads {value}: give an integer >= 1 (NGSolve TaskManager threads)")
+    return value
+
+
+def write_or_keep(ds, path) -> int:
+    """Write ``ds``; if that fails (a full disk), keep it in the temporary folder and say where. Exit code."""
+    import tempfile
+    from datetime import datetime
+    from pathlib import Path
+
+    from . import results
+    from .files import safe_name
+
+    try:
+        results.write(ds, path)
+        return 0
+    except OSError as err:
+        stamp = datetime.now().strftime("%Y%m%d-%H%M%S")
+        keep = Path(tempfile.gettempdir()) / f"workbench-kept-{safe_name(ds.attrs.get('scene', 'run'))}-{stamp}.nc"
+        try:
+            results.write(ds, keep)
+        except OSError as err2:
+            print(_one_line(f"error: {path} could not be written ({err.strerror or err}); keeping the result in "
+                            f"{keep} failed too ({err2.strerror or err2})"), file=sys.stderr)
+            return EXIT_NOT_WRITTEN
+        print(_one_line(f"error: {path} could not be written ({err.strerror or err}); the result is kept in {keep}"),
+              file=sys.stderr)
+        return EXIT_NOT_WRITTEN
 
 
 def cmd_scenes(args) -> int:
@@ -71,7 +131,7 @@ def cmd_show(args) -> int:
     from .scenes import scene
 
     sc = scene(args.scene, **_overrides(args))
-    print(f"{sc.name} ({sc.geometry}, {sc.dim}D): {sc.description}")
+    print(f"{sc.name} ({sc.geometry}, {sc.dim}D, Model {sc.model}): {sc.description}")
     print(f"terms assembled on the contact boundary: {', '.join(sc.terms) or 'none'}\n")
     rows = [(n, str(v), u, r, m) for n, v, u, r, m in sc.table()]
     w = [max(len(r[i]) for r in rows) for i in range(4)]
@@ -81,23 +141,33 @@ def cmd_show(args) -> int:
     return 0
 
 
-def cmd_run(args) -> int:
-    from . import plotting, results
-    from .run import run
-    from .schemes import Diverged
+def _status_line(ds) -> str:
+    a = ds.attrs
+    return (f"{a['scene']}: {a['status']}, {a['nsteps']} steps of the {a['scheme']} scheme in {a['wall_time']:.3g} s "
+            f"(setup {a['setup_time']:.3g} s), ndof {a['ndof']}")
 
+
+def cmd_run(args) -> int:
+    from .errors import Diverged
+    from .run import run
+
+    _check_outputs(args)
     overrides = _overrides(args)
     try:
-        ds = run(args.scene, progress=False if args.no_progress else None, threads=args.threads, **overrides)
+        ds = run(args.scene, progress=False if args.no_progress else None, threads=_threads(args.threads), **overrides)
         code = 0
     except Diverged as err:
-        print(f"error: {err}", file=sys.stderr)
+        print(_one_line(f"error: {err}"), file=sys.stderr)
         ds, code = err.dataset, EXIT_DIVERGED
+    print(_status_line(ds))
     if args.output:
-        results.write(ds, args.output)
-        note = " (incomplete: see attrs 'failure')" if code else ""
-        print(f"wrote {args.output}{note}")
+        written = write_or_keep(ds, args.output)
+        if written == 0:
+            print(f"wrote {args.output}" + (" (incomplete: see attrs 'failure')" if code else ""))
+        code = code or written
     if args.plot:
+        from . import plotting
+
         plotting.overview(ds, args.plot)
         print(f"wrote {args.plot}")
     if args.vtk:
@@ -111,9 +181,7 @@ def cmd_run(args) -> int:
 
 
 def _summary(ds) -> str:
-    a = ds.attrs
-    lines = [f"{a['scene']}: {a['status']}, scheme {a['scheme']}, ndof {a['ndof']}, {a['nsteps']} steps, "
-             f"wall {a['wall_time']:.3g} s"]
+    lines = []
     last = ds.isel(time=-1)
     for p in ds.probe.values:
         xyz = ", ".join(f"{float(ds[f'probe_{c}'][p]):g}" for c in ds.component.values)
@@ -131,26 +199,35 @@ def _reference(text):
     for part in text.split(","):
         if "=" not in part:
             raise ParameterError(f"--reference {text!r}: give finest, ode, exact or e.g. h=0.003,k=0.0005")
-        key, value = part.split("=", 1)
-        out[key.strip()] = value.strip() if key.strip() == "scheme" else float(value)
+        key, value = (s.strip() for s in part.split("=", 1))
+        if key in ("scheme", "solver"):
+            out[key] = value
+            continue
+        try:
+            out[key] = int(value) if key in ("order", "nx", "ny", "nz") else float(value)
+        except ValueError:
+            raise ParameterError(f"--reference {text!r}: {key} = {value!r} is not a number") from None
     return out
 
 
 def cmd_study(args) -> int:
     from pathlib import Path
 
-    from . import plotting, results
     from .study import Study
 
-    overrides = _overrides(args, swept=("h", "k", "order", "scheme"))
-    st = Study(args.scene, h=args.h, k=args.k, k_over_h=args.k_over_h, order=args.order, scheme=args.scheme,
-               reference=_reference(args.reference), n_compare=args.compare, workers=args.workers,
-               client=args.scheduler, **overrides)
+    _check_outputs(args, cases=True)
+    axes = ("h", "k", "order", "scheme")
+    overrides = _overrides(args, swept=axes)
+    given = {name: getattr(args, name) for name in axes if getattr(args, name) is not None}
+    st = Study(args.scene, k_over_h=args.k_over_h, reference=_reference(args.reference), n_compare=args.compare,
+               workers=args.workers, client=args.scheduler, **given, **overrides)
     archive = Path(args.output + ".cases") if args.output else None
     ds = st.run(archive, progress=False if args.no_progress else None)
+    code = 0
     if args.output:
-        results.write(ds, args.output)
-        print(f"wrote {args.output} (cases in {archive}/)")
+        code = write_or_keep(ds, args.output)
+        if code == 0:
+            print(f"wrote {args.output} (cases in {archive}/)")
     for norm in ("error", "error_V", "error_Q", "error_beta", "error_beta_end"):
         rates = ds.observed_order.sel(norm=norm)
         found = {str(a): np.round(rates.sel(along=a).values.ravel(), 3).tolist() for a in rates.along.values
@@ -162,17 +239,50 @@ def cmd_study(args) -> int:
         print(f"study: {o['execute']:.1f} s running {o['new_cases']} new case(s) (their own setup + time loops, "
               f"summed over workers: {o['cases']:.1f} s), {o['evaluate']:.1f} s comparing fields")
     if args.plot:
+        from . import plotting
+
         plotting.convergence(ds, args.plot)
         print(f"wrote {args.plot}")
     if args.pareto:
+        from . import plotting
+
         plotting.pareto(ds, args.pareto)
         print(f"wrote {args.pareto}")
+    return code
+
+
+def cmd_reproduce(args) -> int:
+    import time
+
+    from .files import check_output
+    from .paper import reproduction
+
+    check_output(args.out, "--out", folder=True)
+    overrides = _overrides(args, swept=("h", "k"))
+    problems = reproduction.PROBLEMS if args.problem == "all" else (args.problem,)
+    for problem in problems:
+        t0 = time.perf_counter()
+        result = reproduction.reproduce(problem, args.out, h=args.h, k=args.k, side=not args.no_side, vtk=args.vtk,
+                                        **overrides)
+        print(reproduction.report(problem, result))
+        print(f"  wrote {len(result['files'])} files to {args.out} ({time.perf_counter() - t0:.1f} s)\n")
     return 0
 
 
+def _add_scene_args(p, run_options=True):
+    p.add_argument("scene", help="built-in scene name (see 'workbench scenes') or a .toml scene file")
+    p.add_argument("--set", action="append", metavar="NAME=VALUE", help="override a parameter (repeatable)")
+    if run_options:
+        p.add_argument("--h", type=float, help="element size")
+        p.add_argument("--k", type=float, help="time step")
+        p.add_argument("--T", type=float, help="final time")
+        p.add_argument("--order", type=int, help="polynomial order of the displacement")
+        p.add_argument("--scheme", help="time scheme")
+
+
 def build_parser() -> argparse.ArgumentParser:
-    parser = argparse.ArgumentParser(prog="workbench", description=__doc__.split("\n")[0])
-    sub = parser.add_subparsers(dest="command", required=True)
+    parser = _Parser(prog="workbench", description=__doc__.split("\n")[0])
+    sub = parser.add_subparsers(dest="command", required=True, parser_class=_Parser)
     p = sub.add_parser("scenes", help="list the built-in scenes")
     p.set_defaults(func=cmd_scenes)
     p = sub.add_parser("show", help="list a scene's parameters with value, unit, allowed range and meaning")
@@ -203,6 +313,15 @@ def build_parser() -> argparse.ArgumentParser:
     p.add_argument("--pareto", help="PNG error-vs-cost plot")
     p.add_argument("--no-progress", action="store_true")
     p.set_defaults(func=cmd_study)
+    p = sub.add_parser("reproduce", help="the paper's test problems 1-5: archives, Figs. 2-19, key numbers")
+    p.add_argument("problem", choices=("tp1", "tp2", "tp3", "tp4", "tp5", "all"), help="which problem (or all)")
+    p.add_argument("--out", default="out/reproduction", help="output folder (default out/reproduction)")
+    p.add_argument("--h", type=float, help="element size (default: the preset = the paper's resolution)")
+    p.add_argument("--k", type=float, help="time step (default: the preset = the paper's resolution)")
+    p.add_argument("--no-side", action="store_true", help="skip the side studies (sign flip, convention)")
+    p.add_argument("--vtk", action="store_true", help="also write ParaView files to OUT/vtk")
+    p.add_argument("--set", action="append", metavar="NAME=VALUE", help="override a scene parameter (repeatable)")
+    p.set_defaults(func=cmd_reproduce)
     return parser
 
 
@@ -212,13 +331,19 @@ def main(argv=None) -> int:
     from .results import invocation
 
     argv = sys.argv[1:] if argv is None else list(argv)
-    args = build_parser().parse_args(argv)
-    invocation.set(shlex.join(["workbench"] + argv))
-    try:
-        return args.func(args)
-    except ParameterError as err:
-        print(f"error: {err}", file=sys.stderr)
-        return EXIT_BAD_INPUT
+    with warnings.catch_warnings():
+        warnings.simplefilter("default", RuntimeWarning)
+        warnings.showwarning = _show_warning
+        try:
+            args = build_parser().parse_args(argv)
+            invocation.set(shlex.join(["workbench"] + argv))
+            return args.func(args)
+        except ParameterError as err:
+            print(_one_line(f"error: {err}"), file=sys.stderr)
+            return EXIT_BAD_INPUT
+        except KeyboardInterrupt:
+            print("error: interrupted", file=sys.stderr)
+            return 130
 
 
 if __name__ == "__main__":  # pragma: no cover

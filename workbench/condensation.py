@@ -1,120 +1,74 @@
-"""The contact problem condensed onto the contact-boundary dofs.
+"""The contact problem condensed onto the contact-boundary dofs, and its semismooth Newton solver.
 
-The volume operator of an implicit step, M = K_A / k + K_G, is constant; only
-the boundary functional j acts on the contact dofs C. With S0 = (M^{-1})_CC
-(the discrete Steklov–Poincaré inverse, computed once per k by |C| solves with
-the once-factored M), the step's nonlinear system reduces exactly to
+The volume operator of an implicit step, M (Model A's backward Euler:
+K_A / k + K_G), is constant; only the boundary functional j acts on the contact
+dofs C. With S0 = (M^{-1})_CC (the discrete Steklov–Poincaré inverse, computed once
+per M by |C| solves with the once-factored M), the step's nonlinear system reduces
+exactly to
 
-    S0^{-1} (u_C - z_C) + f(u_C) = 0,        z = M^{-1} r,
+    g(u_C) = S0^{-1} (u_C - z_C) + f(u_C) = 0,        z = M^{-1} r,
 
-where f(u_C) = j(beta, u, .) restricted to C. A semismooth Newton iteration on
-this |C|-dimensional SPD system needs no volume refactorisation; the volume
-field is recovered with one more solve, u = z - M^{-1} P f(u_C).
+where f(u_C) = j(beta, u, .) restricted to C (:class:`ContactOperator`). A
+semismooth Newton iteration on this |C|-dimensional SPD system
+(:class:`CondensedNewton`) needs no volume refactorisation; the volume field is
+recovered with one more solve, u = z - M^{-1} P f(u_C).
 
-The boundary functional and its Jacobian are evaluated by an NGSolve form on a
-surface space holding only the contact-boundary dofs (``Apply`` and
-``AssembleLinearization``; the ``IfPos`` truncations linearise exactly).
+Examples
+--------
+>>> import workbench
+>>> from workbench import discretisation
+>>> d = discretisation.build(workbench.scene("slab", h=0.1, c_tau=1.0))
+>>> op = ContactOperator(d)
+>>> op.size  # 10 free contact vertices, both components (the glue acts tangentially)
+20
 """
 from __future__ import annotations
 
-import ngsolve as ngs
 import numpy as np
 import scipy.linalg as la
 
-from .physics import contact
-
-
-def _nodes_of_boundary(mesh, name):
-    """NodeIds (vertices, edges, faces) of the boundary elements called ``name``."""
-    nodes = []
-    region = mesh.Boundaries(name)
-    seen = set()
-    for el in region.Elements():
-        for kind, items in ((ngs.VERTEX, el.vertices), (ngs.EDGE, el.edges), (ngs.FACE, el.faces)):
-            for item in items:
-                key = (kind, item.nr)
-                if key not in seen:
-                    seen.add(key)
-                    nodes.append(ngs.NodeId(kind, item.nr))
-    return nodes
+from .boundary import contact_dofs
+from .errors import NewtonFailed
+from .physics.ops import NP
 
 
 class ContactOperator:
-    """f(u_C) = j(beta, u, .)|_C and its Jacobian, on the contact dofs of the components that j touches.
+    """f(u_C) = j(beta, u, .)|_C and its Jacobian on the contact dofs C of the components the terms act on.
 
-    Parameters
-    ----------
-    d : Discretisation
+    The bonding field is read from the discretisation each call (the schemes update it in place).
     """
 
     def __init__(self, d):
         self.d = d
-        scene, mesh, dim, order = d.scene, d.mesh, d.dim, d.scene["order"]
-        name = d.contact_name
-        region = mesh.Boundaries(name)
-        if dim == 1:
-            surf = ngs.H1(mesh, order=1, definedon=region)
-        else:
-            surf = ngs.VectorH1(mesh, order=order, definedon=region)
-        surf = ngs.Compress(surf)
-        # components j acts on: the normal one (flat contact side), all of them with the glue
-        comps = list(range(dim)) if "glue" in scene.terms else [dim - 1]
-        vol_dofs, surf_dofs = [], []
-        for node in _nodes_of_boundary(mesh, name):
-            vd = list(d.fes.GetDofNrs(node))
-            sd = list(surf.GetDofNrs(node))
-            if dim == 1:
-                vd, sd = vd[:1], sd[:1]
-            n_scalar = len(vd) // dim if dim > 1 else len(vd)
-            for c in comps:
-                # both spaces store component blocks contiguously: the c-th block of the node's dofs
-                vd_c = vd[c * n_scalar:(c + 1) * n_scalar] if dim > 1 else vd
-                sd_c = sd[c * n_scalar:(c + 1) * n_scalar] if dim > 1 else sd
-                vol_dofs += vd_c
-                surf_dofs += sd_c
-        self.C = np.asarray(vol_dofs)
-        self.S = np.asarray(surf_dofs)
-        free = np.array(d.fes.FreeDofs(), dtype=bool)
-        keep = free[self.C]  # a clamped contact vertex (x = 0) is not an unknown
-        self.C, self.S = self.C[keep], self.S[keep]
-        self.space = surf
-        self.u = ngs.GridFunction(surf)
-        trial, test = surf.TnT()
-        self.form = ngs.BilinearForm(surf)
-        integrand = contact.boundary_integrand(scene.terms, scene, trial, d.beta, test)
-        self.form += integrand.Compile() * ngs.ds(name)
-        self.res = self.u.vec.CreateVector()
+        self.contact = d.model.contact
+        self.C = contact_dofs(d.fes, d.side, self.contact.tangential)
+        self.side = d.side.restricted(self.C)
         self.size = self.C.size
-        self._flat = None
+        self.tangential = self.contact.tangential and bool(self.side.T_tau)
 
-    def set(self, u_C: np.ndarray) -> None:
-        arr = self.u.vec.FV().NumPy()
-        arr[:] = 0.0
-        arr[self.S] = u_C
+    def _beta(self):
+        d = self.d
+        if d.beta is None:
+            return None
+        return d.beta.vec.FV().NumPy()[d.beta_dofs][self.side.element]
 
     def force(self, u_C: np.ndarray) -> np.ndarray:
         """f(u_C): the contact nodal forces (as they enter the residual) on C."""
-        self.set(u_C)
-        self.form.Apply(self.u.vec, self.res)
-        return self.res.FV().NumPy()[self.S].copy()
+        beta = self._beta()
+        p = self.contact.normal(NP, self.side.u_nu(u_C), beta)
+        q = self.contact.tangential_traction(NP, self.side.u_tau(u_C), beta) if self.tangential else None
+        return self.side.integrate(p, q)
 
     def jacobian(self, u_C: np.ndarray) -> np.ndarray:
-        """df/du_C as a dense |C| x |C| matrix (semismooth: the active branch of each IfPos)."""
-        self.set(u_C)
-        self.form.AssembleLinearization(self.u.vec)
-        rows, cols, vals = self.form.mat.COO()
-        if self._flat is None:  # the sparsity pattern is fixed: map it into the dense C x C block once
-            where = np.full(self.space.ndof, -1)
-            where[self.S] = np.arange(self.size)
-            r, c = where[np.asarray(rows)], where[np.asarray(cols)]
-            self._keep = (r >= 0) & (c >= 0)
-            self._flat = r[self._keep] * self.size + c[self._keep]
-        J = np.bincount(self._flat, weights=np.asarray(vals)[self._keep], minlength=self.size * self.size)
-        return J.reshape(self.size, self.size)
+        """df/du_C as a dense |C| x |C| matrix (semismooth: the active branch of each kink)."""
+        beta = self._beta()
+        slope = self.contact.normal_slope(self.side.u_nu(u_C), beta)
+        tslope = self.contact.tangential_slope(self.side.u_tau(u_C), beta) if self.tangential else None
+        return self.side.jacobian(slope, tslope)
 
 
 class CondensedSystem:
-    """S0^{-1} = ((M^{-1})_CC)^{-1} for one matrix M (one step size), built with the factored M."""
+    """S0^{-1} = ((M^{-1})_CC)^{-1} for one matrix M, built with the factored M."""
 
     def __init__(self, solver, ndof: int, C: np.ndarray, chunk: int = 256):
         m = C.size
@@ -137,3 +91,81 @@ class CondensedSystem:
         self.S0_inv = la.cho_solve(la.cho_factor(S0), np.eye(m)) if m else S0
         self.S0_inv = 0.5 * (self.S0_inv + self.S0_inv.T)
         self.S0_abs = np.abs(self.S0_inv)
+
+
+class CondensedNewton:
+    """Semismooth Newton on g(u_C) = S0^{-1} (u_C - z_C) + f(u_C) = 0, globalised by a line search.
+
+    For fixed beta every contact term is monotone, so g is the gradient of a convex
+    energy and each Newton direction s descends it; phi(a) = energy(u_C + a s) has the
+    non-decreasing, piecewise linear derivative g(u_C + a s) . s. The full step is
+    taken unless it clearly overshoots (phi'(1) > 1e-3 |phi'(0)|: usually it does not,
+    and it is exact once the active branches are right); otherwise a step a in (0, 1)
+    with phi'(0)/2 <= phi'(a) <= 0 is found by Illinois regula falsi (an inexact line
+    search: the energy decreases and a is near the minimum along s). Without it a
+    stiff glue (k gamma_nu large) makes the iteration cycle. Converged when
+    |g| <= rtol * (scale of the terms summed in g).
+    """
+
+    def __init__(self, condensed: CondensedSystem, operator: ContactOperator, rtol: float = 1e-10,
+                 max_iterations: int = 40):
+        self.condensed, self.op, self.rtol, self.max_iterations = condensed, operator, rtol, max_iterations
+        self.iterations = 0
+
+    def solve(self, u_C: np.ndarray, z_C: np.ndarray, time: float, label: str = "") -> np.ndarray:
+        """Solve in place from ``u_C`` (the start); return f(u_C) at the solution. ``iterations`` counts up."""
+        S0_inv, S0_abs = self.condensed.S0_inv, self.condensed.S0_abs
+        f = self.op.force(u_C)
+        g_norm = np.inf
+        for it in range(self.max_iterations + 1):
+            diff = u_C - z_C
+            g = S0_inv @ diff + f
+            g_norm = np.abs(g).max()
+            if not np.isfinite(g_norm):
+                break
+            if g_norm <= self.rtol * max((S0_abs @ np.abs(diff)).max(), np.abs(f).max(), 1e-300):
+                return f
+            if it == self.max_iterations:
+                break
+            H = S0_inv + self.op.jacobian(u_C)
+            step = la.cho_solve(la.cho_factor(H, check_finite=False), -g, check_finite=False)
+            self.iterations += 1
+            slope0 = float(g @ step)  # < 0: the step descends
+            f_new = self.op.force(u_C + step)
+            slope1 = float((S0_inv @ (u_C + step - z_C) + f_new) @ step)
+            if slope1 <= 1e-3 * abs(slope0):  # no real overshoot (0 up to round-off once the branches are right)
+                u_C += step
+                f = f_new
+            else:
+                alpha = self._line_search(u_C, step, z_C, slope0, slope1)
+                u_C += alpha * step
+                f = self.op.force(u_C)
+            if np.abs(step).max() <= 1e-14 * (np.abs(u_C).max() + np.abs(z_C).max()):
+                return f  # stagnated at round-off: the correction no longer moves u_C
+        raise NewtonFailed(f"{label}: semismooth Newton did not converge in {self.iterations} iterations "
+                           f"at t = {time:.6g} s (residual {g_norm:.3g}); try a smaller k", time=time)
+
+    def _line_search(self, u_C, step, z_C, slope0, slope1, steps=80):
+        """A step a in (0, 1) with phi'(0) / 2 <= phi'(a) <= 0 by Illinois regula falsi on phi'(a) = g(u_C + a s) . s,
+        which is non-decreasing and piecewise linear (kinks where a contact term changes branch)."""
+        S0_inv = self.condensed.S0_inv
+        a_lo, s_lo, a_hi, s_hi = 0.0, slope0, 1.0, slope1
+        a, side = 1.0, 0
+        for _ in range(steps):
+            a = a_lo - s_lo * (a_hi - a_lo) / (s_hi - s_lo)
+            s_a = float((S0_inv @ (u_C + a * step - z_C) + self.op.force(u_C + a * step)) @ step)
+            if 0.5 * slope0 <= s_a <= 0.0:
+                break
+            if s_a < 0:
+                a_lo, s_lo = a, s_a
+                if side == -1:
+                    s_hi *= 0.5  # Illinois: the kept end stalled twice, halve its weight
+                side = -1
+            else:
+                a_hi, s_hi = a, s_a
+                if side == 1:
+                    s_lo *= 0.5
+                side = 1
+            if a_hi - a_lo <= 1e-15 * max(1.0, a_hi):
+                break
+        return a

@@ -1,85 +1,230 @@
-"""From a scene to NGSolve objects: mesh, spaces, constant matrices, load and boundary forms.
+"""From a model to NGSolve objects: mesh, spaces, constant matrices, loads and the contact side.
 
-Built once per run, before time stepping. The volume matrices (viscous K_A,
-elastic K_G) are assembled here once; the contact-boundary forms exist only
-for the terms the scene declares (no contact and no adhesion: no boundary
-form; no adhesion: no beta space). Index arrays into the dof vector (contact
-nodes, probes, the point force, Dirichlet dofs) are computed here, so the time
-loop does only vector work.
+Built once per run, before time stepping. The volume matrices (Model A: viscous K_A
+and elastic K_G; Model B: the elastic K_A and one stiffness per relaxation tensor)
+are assembled here once; the contact side is prepared as quadrature points with
+trace operators (:mod:`workbench.boundary`), only for the terms the model declares
+(no contact and no adhesion: none; no adhesion: no beta field). Index arrays into
+the dof vector (contact nodes, probes, the point force, Dirichlet dofs) are
+computed here, so the time loop does only vector work.
+
+The NGSolve forms of the boundary functional j and of the bonding rate
+(:attr:`Discretisation.contact_form`, :attr:`Discretisation.rate_form`) remain the
+definition the fast path is checked against; they are built only when asked for.
+
+Examples
+--------
+>>> from workbench.scenes import scene
+>>> d = build(scene("tp1", h=0.1))
+>>> d.ndof, d.beta_dofs.size, d.contact_form is not None
+(11, 1, True)
 """
 from __future__ import annotations
 
-from dataclasses import dataclass, field
+from functools import cached_property
 
 import ngsolve as ngs
 import numpy as np
 
-from . import meshes
-from .physics import bonding, contact, kelvin_voigt
-from .scenes import BOUNDARIES
+from .boundary import ContactSide
+from .physics import kelvin_voigt
+from .physics.ops import NGS
 
 
-@dataclass
+def stiffness(fes, tensor, dim: int) -> ngs.BilinearForm:
+    """The assembled form (tensor eps(u), eps(w)): K_A, K_G or a relaxation stiffness."""
+    u, w = fes.TnT()
+    form = ngs.BilinearForm(fes, symmetric=True)
+    form += kelvin_voigt.energy_product(tensor, u, w, dim) * ngs.dx
+    form.Assemble()
+    return form
+
+
 class Discretisation:
-    """Everything a scheme needs about one scene on one mesh (see :func:`build`)."""
+    """Everything a scheme needs about one model on one mesh (see :func:`build`).
 
-    scene: object
-    mesh: ngs.Mesh
-    fes: ngs.FESpace
-    t: ngs.Parameter
-    u: ngs.GridFunction
-    v: ngs.GridFunction
-    viscous: ngs.BilinearForm
-    elastic: ngs.BilinearForm
-    contact_name: str
-    beta: ngs.GridFunction | None = None
-    loads: Loads | None = None
-    contact_form: ngs.LinearForm | None = None
-    rate_form: ngs.LinearForm | None = None
-    facet_measure: np.ndarray | None = None
-    beta_dofs: np.ndarray | None = None
-    facet_xyz: np.ndarray | None = None
-    node_dofs: np.ndarray = field(default=None)  # (node, component) -> dof
-    node_xyz: np.ndarray = field(default=None)
-    vertex_dofs: np.ndarray = field(default=None)  # (vertex, component) -> dof
-    vertex_xyz: np.ndarray = field(default=None)
-    memory_kind: str = "none"  # Model B: "prony", "kernel" or "none"
-    memory: list = field(default_factory=list)
-    contact_weights: np.ndarray | None = None  # Model B: w_i of the contact vertices
-    dirichlet_dofs: np.ndarray = field(default=None)
-    probe_points: object = None
+    Attributes
+    ----------
+    model : ModelA or ModelB
+    scene : Scene
+        For its discretisation values (h, order, solver, probes) and its name.
+    geometry : workbench.geometry.Geometry
+    mesh, fes : the mesh and the displacement space (H1 in 1D, VectorH1 otherwise)
+    t : ngsolve.Parameter
+        The time at which space- and time-dependent loads are assembled.
+    u, v : ngsolve.GridFunction
+        Displacement and velocity.
+    viscous, elastic : ngsolve.BilinearForm
+        Model A: K_A and K_G; Model B: ``viscous`` is None and ``elastic`` is K_A.
+    side, rate_side : ContactSide or None
+        Model A: the contact side at the quadrature points of the boundary functional
+        and at the facet midpoints (the bonding rate).
+    beta : ngsolve.GridFunction or None
+        The bonding field (P0 on the contact facets); ``beta_dofs`` its dofs in facet order,
+        ``facet_measure`` and ``facet_xyz`` (midpoints) alongside.
+    memory : list
+        Model B: (K_C, C, tau_or_shape) per relaxation tensor.
+    contact_weights : ndarray
+        Model B: w_i = int_Gamma3 phi_i da at the contact vertices.
+    """
 
-    @property
-    def dim(self) -> int:
-        return self.scene.dim
+    def __init__(self, model, scene, mesh, fes):
+        self.model, self.scene, self.geometry = model, scene, model.geometry
+        self.mesh, self.fes = mesh, fes
+        self.dim = self.geometry.dim
+        self.contact_name = self.geometry.boundaries["contact"]
+        self.t = ngs.Parameter(0.0)
+        self.u, self.v = ngs.GridFunction(fes, "u"), ngs.GridFunction(fes, "velocity")
+        self.viscous = self.elastic = None
+        self.side = self.rate_side = self.beta = None
+        self.beta_dofs = self.facet_measure = self.facet_xyz = None
+        self.memory, self.memory_kind, self.contact_weights = [], "none", None
+        self._index_arrays()
+        self.loads = Loads(model.loads, fes, self.t, self.geometry, self.vertex_dofs, self.vertex_xyz)
 
     @property
     def ndof(self) -> int:
         return self.fes.ndof
 
-    def load_vector(self, time: float, out) -> None:
-        """out = F(time): tractions, body force and the point force (out is overwritten)."""
-        self.loads.vector(time, out)
+    def _index_arrays(self) -> None:
+        """Vertex/contact-node dof tables, Dirichlet dofs and probe points."""
+        mesh, fes, dim = self.mesh, self.fes, self.dim
+        ngmesh = mesh.ngmesh  # keep the wrapper alive: Coordinates() is a view into it
+        coords = np.array(ngmesh.Coordinates())[:, :dim]
+        self.vertex_xyz = coords
+        self.vertex_dofs = _vertex_dofs(fes, dim, mesh.nv)
+        nodes = _boundary_vertices(mesh, self.contact_name)
+        self.node_dofs, self.node_xyz = self.vertex_dofs[nodes], coords[nodes]
+        free = np.array(fes.FreeDofs(), dtype=bool)
+        self.dirichlet_dofs = np.nonzero(~free)[0]
+        probes = self.scene["probes"]
+        self.probe_points = mesh(*[np.array([p[i] for p in probes]) for i in range(dim)])
 
+    # -- the prescribed end and the contact nodes ---------------------------------------------------------------
     def dirichlet_value(self, time: float) -> float:
         """Prescribed displacement on Gamma_1 at ``time`` (rod: delta(t); others: 0)."""
-        return self.scene["delta"](t=time) if self.dim == 1 else 0.0
+        delta = self.model.loads.delta
+        return delta(t=time) if delta is not None else 0.0
+
+    @cached_property
+    def moves_clamp(self) -> bool:
+        """Whether the prescribed displacement on Gamma_1 is non-zero somewhere in time (the rod's delta)."""
+        delta = self.model.loads.delta
+        return delta is not None and not delta.is_zero()
+
+    def lift(self, time: float, out: np.ndarray) -> np.ndarray:
+        """``out`` = the dof vector that is delta(time) on the Dirichlet dofs and 0 elsewhere."""
+        out[:] = 0.0
+        out[self.dirichlet_dofs] = self.dirichlet_value(time)
+        return out
 
     def normal_displacement(self, uvec: np.ndarray) -> np.ndarray:
-        """u_nu at the contact nodes from a dof vector (1D: u at the rod end)."""
-        if self.dim == 1:
-            return uvec[self.node_dofs[:, 0]]
-        return -uvec[self.node_dofs[:, -1]]  # flat contact side with nu = -e_y (2D) or -e_z (3D)
+        """u_nu at the contact nodes from a dof vector."""
+        g = self.geometry
+        return g.normal_sign * uvec[self.node_dofs[:, g.normal_axis]]
+
+    @property
+    def normal_dofs(self) -> np.ndarray:
+        """The dof of the normal component at each contact node."""
+        return self.node_dofs[:, self.geometry.normal_axis]
 
     def probe_values(self) -> np.ndarray:
         """u at the probe points, shape (probe, component)."""
         vals = self.u(self.probe_points)
         return np.asarray(vals).reshape(len(self.scene["probes"]), self.dim)
 
+    def load_vector(self, time: float, out) -> None:
+        """out = F(time): tractions, body force and the point force (out is overwritten)."""
+        self.loads.vector(time, out)
 
-def _vector_space(scene, mesh, order):
-    clamp = BOUNDARIES[scene.geometry]["clamp"]
-    if scene.dim == 1:
+    @cached_property
+    def strain_operator(self):
+        """E with (E u)[cell, c] = the mean over the cell of the strain component c (COMPONENTS order): the P0
+        projection of eps(u), assembled once (the reported stress is linear in it)."""
+        import scipy.sparse as sp
+
+        q = ngs.L2(self.mesh, order=0)
+        vol = ngs.LinearForm(q.TestFunction() * ngs.dx).Assemble().vec.FV().NumPy().copy()
+        u, p = self.fes.TrialFunction(), q.TestFunction()
+        eps = kelvin_voigt.strain(u, self.dim)
+        blocks = []
+        for i, j in kelvin_voigt.COMPONENTS[self.dim]:
+            form = ngs.BilinearForm(trialspace=self.fes, testspace=q)
+            form += (eps if self.dim == 1 else eps[i, j]) * p * ngs.dx
+            form.Assemble()
+            rows, cols, vals = form.mat.COO()
+            M = sp.csr_matrix((np.asarray(vals), (np.asarray(rows), np.asarray(cols))), shape=(q.ndof, self.ndof))
+            blocks.append(sp.diags(1.0 / vol) @ M)
+        return [b.tocsr() for b in blocks]
+
+    @cached_property
+    def edges(self):
+        """(edge vertex pairs, their midpoints as mesh points): where a field of order >= 2 is recorded beside the
+        vertices, so that its quadratic part survives in the archive (and in VTK)."""
+        from itertools import combinations
+
+        from .results import mesh_cells
+
+        cells = mesh_cells(self.mesh, self.dim)
+        pairs = np.sort(np.concatenate([cells[:, [a, b]] for a, b in combinations(range(self.dim + 1), 2)]), axis=1)
+        pairs = np.unique(pairs, axis=0)
+        mid = self.vertex_xyz[pairs].mean(axis=1)
+        return pairs, self.mesh(*[mid[:, i] for i in range(self.dim)])
+
+    def edge_values(self) -> np.ndarray:
+        """u at the edge midpoints, shape (edge, component)."""
+        pairs, points = self.edges
+        return np.asarray(self.u(points)).reshape(len(pairs), self.dim)
+
+    def cell_strains(self, u: np.ndarray) -> np.ndarray:
+        """Cell means of eps(u) for a dof vector: shape (cell, component)."""
+        return np.stack([E @ u for E in self.strain_operator], axis=1)
+
+    # -- Model A's contact side ---------------------------------------------------------------------------------
+    def beta_at_points(self, beta_facets: np.ndarray) -> np.ndarray:
+        """The bonding field (per facet) at the force quadrature points."""
+        return beta_facets[self.side.element]
+
+    @cached_property
+    def contact_form(self):
+        """The NGSolve LinearForm of j(beta, u, .) at the current u and beta (the definition; None without terms)."""
+        contact = getattr(self.model, "contact", None)
+        if not contact:
+            return None
+        w = self.fes.TestFunction()
+        u_nu, u_tau = self._normal_and_tangential(self.u)
+        w_nu, w_tau = self._normal_and_tangential(w)
+        integrand = contact.integrand(u_nu, u_tau, self.beta, w_nu, w_tau)
+        if integrand is None:
+            return None
+        form = ngs.LinearForm(self.fes)
+        form += integrand.Compile() * ngs.ds(self.contact_name)
+        return form
+
+    @cached_property
+    def rate_form(self):
+        """The NGSolve LinearForm of the bonding rate tested with the facet indicators (None without adhesion)."""
+        bonding = getattr(self.model, "bonding", None)
+        if bonding is None:
+            return None
+        q = self.beta.space.TestFunction()
+        u_nu, _ = self._normal_and_tangential(self.u)
+        form = ngs.LinearForm(self.beta.space)
+        form += (bonding.rate(NGS, self.beta, u_nu) * q).Compile() * ngs.ds(self.contact_name)
+        return form
+
+    def _normal_and_tangential(self, u):
+        """(u_nu, u_tau) as coefficient functions, with the foundation's normal (:mod:`workbench.geometry`)."""
+        g = self.geometry
+        if self.dim == 1:
+            return g.normal_sign * u, None
+        u_nu = g.normal_sign * u[g.normal_axis]
+        return u_nu, ngs.CF(tuple(u[a] for a in g.facet_axes))
+
+
+def _vector_space(geometry, mesh, order):
+    clamp = geometry.boundaries["clamp"]
+    if geometry.dim == 1:
         return ngs.H1(mesh, order=order, dirichlet=clamp)
     return ngs.VectorH1(mesh, order=order, dirichlet=clamp)
 
@@ -107,17 +252,17 @@ class Loads:
     in one LinearForm assembled per step; space-only ones in one assembled once.
     """
 
-    def __init__(self, scene, fes, t, vertex_dofs, vertex_xyz):
-        self.scene, self.t = scene, t
+    def __init__(self, loads, fes, t, geometry, vertex_dofs, vertex_xyz):
+        self.t = t
         self.separable = []  # (expression, component, dof indices, values)
         varying = ngs.LinearForm(fes)
         fixed = ngs.LinearForm(fes)
         n_varying = n_fixed = 0
         w = fes.TestFunction()
-        dim = scene.dim
-        pieces = [(scene[f"traction_{side}"], ngs.ds(side)) for side in BOUNDARIES[scene.geometry]["traction"]]
-        if dim > 1:
-            pieces.append((scene["body_force"], ngs.dx))
+        dim = geometry.dim
+        pieces = [(expr, ngs.ds(side)) for side, expr in loads.tractions.items()]
+        if dim > 1 and loads.body_force is not None:
+            pieces.append((loads.body_force, ngs.dx))
         for expr, region in pieces:
             if expr.is_zero():
                 continue
@@ -140,15 +285,12 @@ class Loads:
         if n_fixed:
             fixed.Assemble()
             self.fixed = fixed.vec.FV().NumPy().copy()
-        self.point_dofs = None
-        if dim > 1 and not scene["point_force"].is_zero():
-            at = np.asarray(scene["point_force_at"][0])
+        self.point_dofs, self.point_force = None, loads.point_force
+        if dim > 1 and loads.point_force is not None and not loads.point_force.is_zero():
+            at = np.asarray(loads.point_force_at[0])
             nearest = int(np.argmin(np.sum((vertex_xyz - at) ** 2, axis=1)))
             self.point_dofs = vertex_dofs[nearest]
-
-    @property
-    def empty(self) -> bool:
-        return not self.separable and self.varying is None and self.fixed is None and self.point_dofs is None
+        self._values = {}
 
     def vector(self, time: float, out) -> None:
         """out = F(time) (an NGSolve vector, overwritten)."""
@@ -161,128 +303,24 @@ class Loads:
             arr[:] = 0.0
         if self.fixed is not None:
             arr += self.fixed
-        values = {}
+        values = self._values
+        values.clear()
         for expr, c, idx, vals in self.separable:
-            if id(expr) not in values:  # evaluate each expression once per step
-                values[id(expr)] = np.atleast_1d(expr(t=time))
-            g = values[id(expr)][c]
+            key = id(expr)
+            if key not in values:  # evaluate each expression once per step
+                values[key] = np.atleast_1d(expr(t=time))
+            g = values[key][c]
             if g != 0.0:
                 arr[idx] += g * vals
         if self.point_dofs is not None:
-            arr[self.point_dofs] += np.atleast_1d(self.scene["point_force"](t=time))
-
-
-def build(scene) -> Discretisation:
-    """Assemble the scene's constant parts on its mesh (Model B: see :func:`build_memory`).
-
-    Examples
-    --------
-    >>> from workbench.scenes import scene
-    >>> d = build(scene("tp1", h=0.1))
-    >>> d.ndof, d.beta_dofs.size, d.contact_form is not None
-    (11, 1, True)
-    """
-    if scene.model == "B":
-        return build_memory(scene)
-    mesh = meshes.build(scene)
-    dim, order = scene.dim, scene["order"]
-    fes = _vector_space(scene, mesh, order)
-    u_trial, w = fes.TnT()
-    A, G = kelvin_voigt.tensors(scene)
-    viscous = ngs.BilinearForm(fes, symmetric=True)
-    viscous += kelvin_voigt.energy_product(A, u_trial, w, dim) * ngs.dx
-    elastic = ngs.BilinearForm(fes, symmetric=True)
-    elastic += kelvin_voigt.energy_product(G, u_trial, w, dim) * ngs.dx
-    viscous.Assemble()
-    elastic.Assemble()
-
-    d = _new(scene, mesh, fes, viscous, elastic)
-    u, contact_name = d.u, d.contact_name
-    terms = scene.terms
-    if "adhesion" in terms:
-        _add_bonding(d)
-    integrand = contact.boundary_integrand(terms, scene, u, d.beta, w)
-    if integrand is not None:
-        d.contact_form = ngs.LinearForm(fes)
-        d.contact_form += integrand.Compile() * ngs.ds(contact_name)
-    return d
-
-
-def _new(scene, mesh, fes, viscous, elastic) -> Discretisation:
-    """The state (u at u0, v = 0), time parameter and index arrays around the assembled matrices."""
-    u, v = ngs.GridFunction(fes, "u"), ngs.GridFunction(fes, "velocity")
-    if "u0" in scene.values:  # Model A's initial condition (Model B solves for u(0))
-        u.Set(scene["u0"].cf())
-    d = Discretisation(scene, mesh, fes, ngs.Parameter(0.0), u, v, viscous, elastic,
-                       BOUNDARIES[scene.geometry]["contact"])
-    _index_arrays(d)
-    return d
-
-
-def _index_arrays(d: Discretisation) -> None:
-    """Vertex/contact-node dof tables, Dirichlet dofs, probe points and loads."""
-    mesh, fes, scene, dim = d.mesh, d.fes, d.scene, d.dim
-    ngmesh = mesh.ngmesh  # keep the wrapper alive: Coordinates() is a view into it
-    coords = np.array(ngmesh.Coordinates())[:, :dim]
-    d.vertex_xyz = coords
-    d.vertex_dofs = _vertex_dofs(fes, dim, mesh.nv)
-    nodes = _boundary_vertices(mesh, d.contact_name)
-    d.node_dofs, d.node_xyz = d.vertex_dofs[nodes], coords[nodes]
-    free = np.array(fes.FreeDofs(), dtype=bool)
-    d.dirichlet_dofs = np.nonzero(~free)[0]
-
-    xs = [np.array([p[i] for p in scene["probes"]]) for i in range(dim)]
-    d.probe_points = mesh(*xs)
-
-    d.loads = Loads(scene, fes, d.t, d.vertex_dofs, coords)
-
-
-def build_memory(scene) -> Discretisation:
-    """Model B: the elastic stiffness K_A, the memory stiffnesses and the nodal contact weights.
-
-    ``viscous`` is None (no viscosity); ``elastic`` is K_A; ``memory`` holds
-    (K_Ci, tau_i) for a Prony series or (K_C, b) for a general kernel;
-    ``contact_weights`` are w_i = int_Gamma3 phi_i da of the contact vertices.
-    """
-    from .physics import memory
-
-    mesh = meshes.build(scene)
-    dim = scene.dim
-    fes = _vector_space(scene, mesh, 1)
-    u_trial, w = fes.TnT()
-
-    def stiffness(tensor):
-        form = ngs.BilinearForm(fes, symmetric=True)
-        form += kelvin_voigt.energy_product(tensor, u_trial, w, dim) * ngs.dx
-        form.Assemble()
-        return form
-
-    A = kelvin_voigt.scalar(scene["a"]) if dim == 1 else \
-        memory.tensor_of(scene["E"], scene["nu"], dim)
-    d = _new(scene, mesh, fes, None, stiffness(A))
-    contact_name = d.contact_name
-    d.memory_kind = "prony" if scene["prony"] else ("kernel" if "memory" in scene.terms else "none")
-    if d.memory_kind == "prony":
-        d.memory = [(stiffness(C), C, tau) for C, tau in memory.prony_tensors(scene)]
-    elif d.memory_kind == "kernel":
-        C, b = memory.kernel_tensor(scene)
-        d.memory = [(stiffness(C), C, b)]
-    else:
-        d.memory = []
-    p1 = ngs.H1(mesh, order=1)
-    lf = ngs.LinearForm(p1)
-    lf += p1.TestFunction() * ngs.ds(contact_name)
-    lf.Assemble()
-    vertices = _boundary_vertices(mesh, contact_name)
-    d.contact_weights = lf.vec.FV().NumPy()[vertices].copy()
-    return d
+            arr[self.point_dofs] += np.atleast_1d(self.point_force(t=time))
 
 
 def bonding_space(mesh, dim: int, name: str):
     """The space of beta: P0 on the contact facets (a point value at the 1D rod end).
 
-    Returns (space, beta_dofs, facet measures, facet midpoints): the dofs that
-    live on the contact side, in the order the results store them.
+    Returns (space, facet measures, facet midpoints, dof of each facet) for the
+    facets in element order.
     """
     if dim == 1:
         space = ngs.H1(mesh, order=1, definedon=mesh.Boundaries(name))
@@ -293,7 +331,10 @@ def bonding_space(mesh, dim: int, name: str):
     measure += q * ngs.ds(name)
     measure.Assemble()
     m = measure.vec.FV().NumPy().copy()
-    dofs = np.nonzero(m > 0)[0]
+    if dim == 1:
+        dofs = np.nonzero(m > 0)[0]
+    else:
+        dofs = np.array([space.GetDofNrs(el)[0] for el in mesh.Boundaries(name).Elements()], dtype=np.int64)
     xyz = []
     for c in (ngs.x, ngs.y, ngs.z)[:dim]:
         lf = ngs.LinearForm(space)
@@ -303,15 +344,61 @@ def bonding_space(mesh, dim: int, name: str):
     return space, dofs, m[dofs], np.stack(xyz, axis=1)
 
 
-def _add_bonding(d: Discretisation) -> None:
-    """The beta field and its rate form (bonding law, P_B = facet mean)."""
-    scene, name = d.scene, d.contact_name
-    space, d.beta_dofs, d.facet_measure, d.facet_xyz = bonding_space(d.mesh, d.dim, name)
-    q = space.TestFunction()
-    d.beta = ngs.GridFunction(space, "beta")
-    d.beta.vec.FV().NumPy()[d.beta_dofs] = scene["beta0"]
-    v = scene.values
-    u_nu, _ = contact.normal_and_tangential(d.u, contact.outward_normal(d.dim), d.dim)
-    rate = bonding.debonding_rate(d.beta, u_nu, v["gamma_nu"], v["eps_a"], v["L"], v["bonding_truncation"])
-    d.rate_form = ngs.LinearForm(space)
-    d.rate_form += (rate * q).Compile() * ngs.ds(name)
+def build(model_or_scene, scene=None) -> Discretisation:
+    """Assemble the constant parts of a model on its mesh (a Scene is turned into its model first).
+
+    Examples
+    --------
+    >>> from workbench.scenes import scene
+    >>> d = build(scene("memory_slab", h=0.25))
+    >>> d.viscous is None, d.memory_kind, round(float(d.contact_weights.sum()), 12)
+    (True, 'prony', 2.0)
+    """
+    from .scenes import Scene
+
+    if isinstance(model_or_scene, Scene):
+        scene, model = model_or_scene, model_or_scene.model_of()
+    else:
+        model = model_or_scene
+    geometry = model.geometry
+    mesh = geometry.mesh()
+    fes = _vector_space(geometry, mesh, scene["order"])
+    d = Discretisation(model, scene, mesh, fes)
+    if model.kind == "B":
+        _memory_parts(d)
+    else:
+        _kelvin_voigt_parts(d)
+    return d
+
+
+def _kelvin_voigt_parts(d: Discretisation) -> None:
+    m = d.model
+    d.viscous = stiffness(d.fes, m.viscous, d.dim)
+    d.elastic = stiffness(d.fes, m.elastic, d.dim)
+    if m.contact or m.bonding is not None:
+        d.side = ContactSide(d.fes, d.contact_name, d.geometry, rule=d.scene["order"])
+    if m.bonding is not None:
+        d.rate_side = ContactSide(d.fes, d.contact_name, d.geometry, rule=0)
+        space, d.beta_dofs, d.facet_measure, d.facet_xyz = bonding_space(d.mesh, d.dim, d.contact_name)
+        d.beta = ngs.GridFunction(space, "beta")
+        d.beta.vec.FV().NumPy()[d.beta_dofs] = m.beta0
+    if m.loads.u0 is not None:  # Model A's initial condition (Model B solves for u(0))
+        d.u.Set(m.loads.u0.cf())
+
+
+def _memory_parts(d: Discretisation) -> None:
+    """Model B: the elastic stiffness K_A, the memory stiffnesses and the nodal contact weights."""
+    m = d.model
+    d.elastic = stiffness(d.fes, m.elastic, d.dim)
+    if m.memory is not None:
+        d.memory_kind = m.memory.kind
+        if m.memory.kind == "prony":
+            d.memory = [(stiffness(d.fes, C, d.dim), C, tau) for C, tau in m.memory.terms]
+        else:
+            d.memory = [(stiffness(d.fes, m.memory.tensor, d.dim), m.memory.tensor, m.memory.shape)]
+    p1 = ngs.H1(d.mesh, order=1)
+    lf = ngs.LinearForm(p1)
+    lf += p1.TestFunction() * ngs.ds(d.contact_name)
+    lf.Assemble()
+    vertices = _boundary_vertices(d.mesh, d.contact_name)
+    d.contact_weights = lf.vec.FV().NumPy()[vertices].copy()

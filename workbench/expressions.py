@@ -38,6 +38,16 @@ class ExpressionError(ValueError):
     """A malformed expression; the message names the parameter and the fault."""
 
 
+#: Limits that keep a mistyped or hostile expression from exhausting the parser or the machine.
+MAX_LENGTH = 4000
+MAX_DEPTH = 100
+
+
+def _shown(text: str, n: int = 60) -> str:
+    """The expression as quoted in a message (cut: a 60 kB text is not echoed back)."""
+    return repr(text) if len(text) <= n else repr(text[: n - 3] + "...")
+
+
 _BINOPS = {ast.Add: "+", ast.Sub: "-", ast.Mult: "*", ast.Div: "/", ast.Pow: "**"}
 
 
@@ -137,14 +147,20 @@ def _walk(node, env, funcs, const):
     raise AssertionError(f"unchecked node {type(node).__name__}")  # _check rejects these
 
 
-def _check(node, text, name, allowed):
+def _check(node, text, name, allowed, depth=0):
     """Reject anything outside the grammar, naming the parameter and the token."""
-    where = f"in {name} = {text!r}" if name else f"in {text!r}"
+    where = f"in {name} = {_shown(text)}" if name else f"in {_shown(text)}"
+    if depth > MAX_DEPTH:
+        raise ExpressionError(f"{where}: nested more than {MAX_DEPTH} levels deep")
     if isinstance(node, ast.Constant):
         if isinstance(node.value, bool) or not isinstance(node.value, (int, float)):
-            raise ExpressionError(f"{where}: only numbers are allowed as constants, got {node.value!r}")
-        if not math.isfinite(node.value):
-            raise ExpressionError(f"{where}: constant {node.value!r} is not finite")
+            raise ExpressionError(f"{where}: only numbers are allowed as constants, got {str(node.value)[:40]!r}")
+        try:
+            finite = math.isfinite(float(node.value))
+        except OverflowError:
+            finite = False
+        if not finite:
+            raise ExpressionError(f"{where}: a constant is too large (not a finite float)")
         return
     if isinstance(node, ast.Name):
         if node.id in CONSTANTS or node.id in allowed:
@@ -155,11 +171,11 @@ def _check(node, text, name, allowed):
         raise ExpressionError(
             f"{where}: unknown name {node.id!r} (allowed variables: {', '.join(allowed)}, constant: pi){extra}")
     if isinstance(node, ast.UnaryOp) and isinstance(node.op, (ast.USub, ast.UAdd)):
-        _check(node.operand, text, name, allowed)
+        _check(node.operand, text, name, allowed, depth + 1)
         return
     if isinstance(node, ast.BinOp) and type(node.op) in _BINOPS:
-        _check(node.left, text, name, allowed)
-        _check(node.right, text, name, allowed)
+        _check(node.left, text, name, allowed, depth + 1)
+        _check(node.right, text, name, allowed, depth + 1)
         return
     if isinstance(node, ast.Call):
         if not isinstance(node.func, ast.Name) or node.func.id not in FUNCTIONS:
@@ -172,7 +188,7 @@ def _check(node, text, name, allowed):
         if node.keywords or len(node.args) != want:
             raise ExpressionError(f"{where}: {node.func.id}() takes {want} argument(s)")
         for a in node.args:
-            _check(a, text, name, allowed)
+            _check(a, text, name, allowed, depth + 1)
         return
     raise ExpressionError(f"{where}: {type(node).__name__} is not allowed in an expression")
 
@@ -206,13 +222,22 @@ def parse(text, *, name: str = "", allowed=VARIABLES, size: int | None = None) -
         src = source.replace("^", "**").strip()
         if not src:
             raise ExpressionError(f"{name or 'expression'} is empty")
+        if len(src) > MAX_LENGTH:
+            raise ExpressionError(f"{name} = {_shown(source)} is {len(src)} characters long; at most {MAX_LENGTH} "
+                                  "are allowed")
+        if src.count("(") > MAX_DEPTH * 4:
+            raise ExpressionError(f"in {name} = {_shown(source)}: too many parentheses (nesting is limited to "
+                                  f"{MAX_DEPTH} levels)")
         try:
             tree = ast.parse(src, mode="eval").body
         except SyntaxError as err:
-            raise ExpressionError(f"in {name} = {source!r}: syntax error ({err.msg})") from None
+            raise ExpressionError(f"in {name} = {_shown(source)}: syntax error ({err.msg})") from None
+        except (RecursionError, MemoryError):
+            raise ExpressionError(f"in {name} = {_shown(source)}: nested too deeply (at most {MAX_DEPTH} "
+                                  "levels)") from None
         terms = tuple(tree.elts) if isinstance(tree, ast.Tuple) else (tree,)
         if not terms:
-            raise ExpressionError(f"in {name} = {source!r}: empty tuple")
+            raise ExpressionError(f"in {name} = {_shown(source)}: empty tuple")
         for term in terms:
             _check(term, source, name, allowed)
         used = frozenset(n.id for term in terms for n in ast.walk(term)
@@ -220,12 +245,13 @@ def parse(text, *, name: str = "", allowed=VARIABLES, size: int | None = None) -
         expr = Expression(source, terms, used)
     bad = [v for v in expr.variables if v not in allowed]
     if bad:
-        raise ExpressionError(f"in {name} = {expr.source!r}: {bad[0]!r} not allowed here (allowed: {', '.join(allowed)})")
+        raise ExpressionError(f"in {name} = {_shown(expr.source)}: {bad[0]!r} not allowed here (allowed: "
+                              f"{', '.join(allowed)})")
     if size is not None and expr.size != size:
         if expr.size == 1 and expr.is_zero():
             return Expression(expr.source, expr.terms * size, expr.variables)
         raise ExpressionError(
-            f"{name} = {expr.source!r} has {expr.size} component(s), {size} are needed"
+            f"{name} = {_shown(expr.source)} has {expr.size} component(s), {size} are needed"
             + (f", e.g. '({', '.join(['0'] * size)})'" if size > 1 else ""))
     return expr
 

@@ -43,18 +43,36 @@ def _alive(pid: int) -> bool:
     return True
 
 
+#: A temporary without a writer's pid (as older versions named them) is stale after this many seconds.
+LEGACY_STALE = 600.0
+
+
 def remove_stale_temporaries(path: Path) -> list:
-    """Remove ``.NAME.PID.*.tmp`` files next to ``path`` whose writing process is gone; return them."""
+    """Remove the temporaries of ``path`` that no writer will finish; return them.
+
+    ``.NAME.PID.HEX.tmp`` whose process is gone, and ``.NAME.XXXXXXXX.tmp`` (no pid: older
+    versions' names) older than :data:`LEGACY_STALE` seconds.
+    """
+    import time
+
     path = Path(path)
     removed = []
-    pattern = re.compile(re.escape(f".{path.name}.") + r"(\d+)\.[0-9a-f]+\.tmp$")
+    with_pid = re.compile(re.escape(f".{path.name}.") + r"(\d+)\.[0-9a-f]+\.tmp$")
+    legacy = re.compile(re.escape(f".{path.name}.") + r"[A-Za-z0-9_]{8}\.tmp$")
     try:
         entries = list(path.parent.iterdir())
     except OSError:
         return removed
+    now = time.time()
     for entry in entries:
-        m = pattern.match(entry.name)
-        if m and int(m.group(1)) != os.getpid() and not _alive(int(m.group(1))):
+        m = with_pid.match(entry.name)
+        stale = m is not None and int(m.group(1)) != os.getpid() and not _alive(int(m.group(1)))
+        if m is None and legacy.match(entry.name):
+            try:
+                stale = now - entry.stat().st_mtime > LEGACY_STALE
+            except OSError:
+                stale = False
+        if stale:
             try:
                 entry.unlink()
                 removed.append(entry)

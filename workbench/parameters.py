@@ -24,6 +24,7 @@ from dataclasses import dataclass
 
 from .errors import ParameterError
 from .expressions import Expression, ExpressionError, parse
+from .schemes import REGISTRY as SCHEME_REGISTRY
 
 
 @dataclass(frozen=True)
@@ -32,8 +33,8 @@ class Param:
 
     ``kind`` is one of ``float``, ``int``, ``flag``, ``choice``, ``expr``
     (scalar expression), ``vector`` (vector expression, size set by the
-    geometry), ``points`` (a list of coordinate tuples) or ``times`` (a list of
-    times). ``lower``/``upper`` bound numbers; ``*_open`` says whether the bound
+    geometry), ``points`` (a list of coordinate tuples), ``times`` (a list of
+    times) or ``matrix`` (a square matrix of numbers, empty when not given). ``lower``/``upper`` bound numbers; ``*_open`` says whether the bound
     itself is excluded.
     """
 
@@ -117,6 +118,8 @@ class Param:
             return _points(name, value)
         if self.kind == "times":
             return _times(name, value)
+        if self.kind == "matrix":
+            return _matrix(name, value)
         raise AssertionError(self.kind)
 
 
@@ -132,7 +135,7 @@ def _points(name, value):
         except json.JSONDecodeError:
             # "(1, 0.1); (0.5, 0)" on the command line
             try:
-                value = [[float(c) for c in p.strip().strip("()[]").split(",")]
+                value = [[float(c) for c in p.strip().strip("()[]").split(",") if c.strip()]
                          for p in text.split(";") if p.strip()]
             except ValueError:
                 raise ParameterError(f"{name} = {text!r}: give points as '(x, y); (x, y)' or a JSON list") from None
@@ -155,6 +158,25 @@ def _times(name, value):
     if any(not math.isfinite(t) or t < 0 for t in ts):
         raise ParameterError(f"{name}: times must be finite and >= 0")
     return ts
+
+
+def _matrix(name, value):
+    if isinstance(value, str):
+        text = value.strip()
+        if not text:
+            return ()
+        try:
+            value = json.loads(text)
+        except json.JSONDecodeError:
+            raise ParameterError(f"{name} = {text!r}: give a matrix as a JSON list of rows, e.g. "
+                                 "[[1100, 330, 0], [330, 1100, 0], [0, 0, 385]]") from None
+    try:
+        rows = tuple(tuple(float(c) for c in row) for row in value)
+    except (TypeError, ValueError):
+        raise ParameterError(f"{name} = {value!r}: expected a list of rows of numbers") from None
+    if rows and (any(len(r) != len(rows) for r in rows) or any(not math.isfinite(c) for r in rows for c in r)):
+        raise ParameterError(f"{name}: the matrix must be square with finite entries")
+    return rows
 
 
 def _p(name, default, unit, meaning, kind="float", **kw) -> Param:
@@ -181,7 +203,7 @@ PARAMETERS: dict[str, Param] = {p.name: p for p in [
     _p("k", 0.01, "s", "time step (uniform grid; the last step is not longer than k)", **_POS),
     _p("scheme", "explicit", "", "time scheme: 'explicit' = the paper's (contact lagged, conditionally stable), "
        "'implicit' = backward Euler with implicit contact (stable); Model B: 'vi' (one variational inequality "
-       "per step)", "choice", choices=("explicit", "implicit", "vi")),
+       "per step)", "choice", choices=tuple(SCHEME_REGISTRY)),
     _p("allow_unstable", False, "", "run the explicit scheme even when k exceeds its predicted stability limit",
        "flag"),
     _p("solver", "auto", "", "linear solver for the constant matrix: banded Cholesky (RCM order), NGSolve's "
@@ -192,13 +214,19 @@ PARAMETERS: dict[str, Param] = {p.name: p for p in [
     _p("nu", 0.3, "1", "Poisson's ratio (elasticity G)", lower=-1.0, upper=0.5, lower_open=True, upper_open=True),
     _p("a1", 30.0, "Pa s", "viscosity: coefficient of tr(eps') I", **_NONNEG),
     _p("a2", 20.0, "Pa s", "viscosity: coefficient of eps'", **_POS),
+    _p("plane", "stress", "", "2D bodies: plane stress (the paper's tests) or plane strain", "choice",
+       choices=("stress", "strain")),
+    _p("elastic_tensor", (), "Pa", "elastic tensor (Model A: G, Model B: A) as a matrix in Voigt notation, strains "
+       "(e11, e22, 2 e12) in 2D or (e11, e22, e33, 2 e23, 2 e13, 2 e12) in 3D; replaces E and nu", "matrix"),
+    _p("viscous_tensor", (), "Pa s", "Model A: the viscous tensor A as a Voigt matrix (as elastic_tensor); replaces "
+       "a1 and a2", "matrix"),
     _p("a", 1.0, "Pa", "rod elastic modulus (sigma = a u_x + b u_xt)", **_POS),
     _p("b", 1.0, "Pa s", "rod viscosity (sigma = a u_x + b u_xt)", **_POS),
     # contact physics on Gamma_3
     _p("contact", True, "", "normal compliance of the foundation is modelled", "flag"),
     _p("adhesion", True, "", "bonding field beta and adhesive tractions are modelled", "flag"),
     _p("c_nu", 1.0, "Pa/m^m", "normal compliance stiffness: p_nu(r) = c_nu ((r - gap)_+)^m_nu", **_NONNEG),
-    _p("m_nu", 1.0, "1", "normal compliance exponent", lower=1.0),
+    _p("m_nu", 1.0, "1", "normal compliance exponent", lower=1.0, upper=10.0),
     _p("gap", 0.0, "m", "g: Model A, the initial gap to the foundation; Model B, the thickness of the compliant "
        "layer over the rigid foundation (u_nu <= g)", **_NONNEG),
     _p("gamma_nu", 0.3, "Pa/m", "adhesion coefficient", **_NONNEG),
@@ -236,9 +264,29 @@ PARAMETERS: dict[str, Param] = {p.name: p for p in [
 ]}
 
 
+def _add_law_parameters() -> tuple:
+    """Add the parameters the contact laws declare in their own files (workbench.physics.laws); their names."""
+    from .physics.laws import LAWS
+
+    names = []
+    for law in LAWS:
+        for param in law.parameters:
+            if param.name in PARAMETERS and PARAMETERS[param.name] != param:
+                raise RuntimeError(f"contact law {law.name}: parameter {param.name} is already defined")
+            PARAMETERS[param.name] = param
+            names.append(param.name)
+    return tuple(names)
+
+
+#: Names of the parameters the contact laws add (beyond the table above).
+LAW_PARAMETERS = _add_law_parameters()
+
+
 def closest_name(name: str, known) -> str:
-    """A 'did you mean' suffix for an unknown name, or ''."""
-    hint = difflib.get_close_matches(name, list(known), n=1, cutoff=0.6)
+    """A 'did you mean' suffix for an unknown name, or '' (an exact match but for case comes first)."""
+    known = list(known)
+    same = [k for k in known if k.lower() == str(name).lower()]
+    hint = same or difflib.get_close_matches(str(name), known, n=1, cutoff=0.6)
     return f"; did you mean {hint[0]!r}?" if hint else ""
 
 

@@ -42,6 +42,11 @@ def _save(fig, path):
     return fig
 
 
+def plain(text) -> str:
+    """Text shown as written (a scene name with '$' is not mathtext)."""
+    return str(text).replace("$", r"\$")
+
+
 def _probe_label(ds, p):
     return "(" + ", ".join(f"{float(ds[f'probe_{c}'][p]):g}" for c in ds.component.values) + ")"
 
@@ -111,7 +116,7 @@ def overview(ds, path=None):
             ax.set(xlabel="t [s]", ylabel="contact pressure [Pa]", title="contact end: pressure and state")
             ax.legend(fontsize=7)
     status = "" if ds.attrs.get("status") == "complete" else "  [INCOMPLETE]"
-    fig.suptitle(f"{ds.attrs.get('scene')}: scheme {ds.attrs.get('scheme')}, h = {ds.attrs.get('h_max'):.3g}, "
+    fig.suptitle(f"{plain(ds.attrs.get('scene'))}: scheme {ds.attrs.get('scheme')}, h = {ds.attrs.get('h_max'):.3g}, "
                  f"k = {ds.attrs.get('k_actual'):.3g}{status}", fontsize=9)
     return _save(fig, path)
 
@@ -161,7 +166,7 @@ def convergence(study_ds, path=None, norms=("error", "error_V", "error_Q", "erro
                ylabel=f"{norm} [{units}]", title=norm)
         ax.xaxis.set_minor_formatter(matplotlib.ticker.NullFormatter())
         ax.legend(fontsize=7, title="fitted order", title_fontsize=7)
-    fig.suptitle(f"{study_ds.attrs.get('scene')}: reference {study_ds.attrs.get('reference')} "
+    fig.suptitle(f"{plain(study_ds.attrs.get('scene'))}: reference {plain(study_ds.attrs.get('reference'))} "
                  f"(dotted: slope 1)", fontsize=9)
     return _save(fig, path)
 
@@ -195,7 +200,7 @@ def pareto(study_ds, path=None, error="error", cost="wall_time"):
                                           or d in ("h", "k")))
     units = err_da.attrs.get("units", "")
     ax.set(xlabel=f"{cost} + setup [s]" if cost == "wall_time" else f"{cost} [s]", ylabel=f"{error} [{units}]",
-           title=f"{study_ds.attrs.get('scene')}: accuracy vs cost")
+           title=f"{plain(study_ds.attrs.get('scene'))}: accuracy vs cost")
     ax.legend(fontsize=7, loc="lower left")
     ax.text(1.02, 1.0, "\n".join(lines), transform=ax.transAxes, va="top", fontsize=7, family="monospace")
     return _save(fig, path)

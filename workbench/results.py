@@ -12,6 +12,7 @@ Schema (SPEC contract, extended):
 ``von_mises(snapshot, cell)``             von Mises norm of sigma_h [Pa]
 ``u_dofs(snapshot, dof)``                 the displacement dof vector (exact field reconstruction)
 ``cell_vertices(cell, corner)``           mesh connectivity, with ``vertex_x/y/z`` coordinates
+``u_edges(snapshot, edge, component)``    order >= 2: the field at the edge midpoints (``edge_vertices``)
 ========================================  =====================================================
 
 Dataset attributes hold every scene parameter under its own name (expressions
@@ -36,8 +37,6 @@ from .parameters import to_plain
 
 COMPONENTS = ("x", "y", "z")
 STRESS_COMPONENTS = {1: ("xx",), 2: ("xx", "yy", "xy"), 3: ("xx", "yy", "zz", "yz", "xz", "xy")}
-_STRESS_INDEX = {1: [(0, 0)], 2: [(0, 0), (1, 1), (0, 1)],
-                 3: [(0, 0), (1, 1), (2, 2), (1, 2), (0, 2), (0, 1)]}
 
 #: (units, long_name) of every variable and coordinate the schema knows.
 VARIABLES = {
@@ -51,6 +50,8 @@ VARIABLES = {
     "stress": ("Pa", "stress, piecewise constant (P_Q projection)"),
     "von_mises": ("Pa", "von Mises norm of the stress"),
     "cell_vertices": ("1", "vertex indices of each cell"),
+    "edge_vertices": ("1", "vertex indices of each mesh edge"),
+    "u_edges": ("m", "displacement at the edge midpoints (elements of order >= 2)"),
     "snapshot_time": ("s", "time of the field snapshot"),
     "newton_iterations": ("1", "semismooth Newton iterations in the time step (all coupling passes)"),
     "coupling_passes": ("1", "passes of the (u, beta) coupling iteration in the time step"),
@@ -105,77 +106,81 @@ def versions() -> dict:
 
 
 class Recorder:
-    """Collects a run's records into preallocated arrays and builds the Dataset.
+    """Collects a run's records by time and builds the Dataset.
 
-    ``record_steps`` and ``snapshot_steps`` are the step indices to keep; the
-    scheme calls :meth:`record` / :meth:`snapshot` at those steps only.
+    The time loop offers every step's end time (:meth:`record`); the recorder keeps
+    t0, T, the ``record_times`` if given, else every step thinned to at most about
+    ``max_records`` records (one whenever a (T / max_records)-long stretch has passed,
+    whatever the step sizes), and whole fields at the ``snapshots`` times (which the
+    step controller lands on exactly) and at T.
     """
 
-    def __init__(self, disc, times, record_steps, snapshot_steps):
+    def __init__(self, disc, T: float, snapshots=(), record_times=None, max_records: int = 2000):
         self.disc = disc
-        self.times = np.asarray(times)
-        self.record_steps = np.asarray(sorted(set(int(s) for s in record_steps)))
-        self.snapshot_steps = np.asarray(sorted(set(int(s) for s in snapshot_steps)))
-        self._want_record = set(self.record_steps.tolist())
-        self._want_snapshot = set(self.snapshot_steps.tolist())
-        n, dim = len(self.record_steps), disc.dim
-        self.u_probe = np.full((n, len(disc.scene["probes"]), dim), np.nan)
-        self.u_contact = np.full((n, len(disc.node_dofs), dim), np.nan)
-        self.beta = np.full((n, len(disc.beta_dofs)), np.nan) if disc.beta is not None else None
-        self.extra = {}  # per-record diagnostics, e.g. newton_iterations
-        self.node_extra = {}  # per-record, per-contact-node values, e.g. contact_pressure
-        self.n_recorded = 0
+        self.T = float(T)
+        self.tol = 1e-9 * max(1.0, self.T)
+        self.snapshot_times = sorted({float(t) for t in snapshots} | {self.T})
+        self.record_times = None if record_times is None else np.sort(np.asarray(record_times, dtype=float))
+        self.spacing = self.T / max_records
+        self.last = -np.inf
+        self.times, self.steps = [], []
+        self.u_probe, self.u_contact, self.beta = [], [], []
+        self.extra, self.node_extra = {}, {}  # per-record diagnostics, per-contact-node values
         self.snaps = []  # (time, u_dofs, stress, von_mises)
+        self.step = -1
 
-    def wants(self, step: int) -> bool:
-        return step in self._want_record
+    def _wanted(self, t: float, final: bool) -> bool:
+        if final or self.step == 0:
+            return True
+        if self.record_times is not None:
+            i = np.searchsorted(self.record_times, t - self.tol)
+            return i < len(self.record_times) and abs(self.record_times[i] - t) <= self.tol
+        return t - self.last >= self.spacing * (1 - 1e-9)
 
-    def wants_snapshot(self, step: int) -> bool:
-        return step in self._want_snapshot
+    def record(self, t: float, scheme, final: bool = False) -> None:
+        """Offer the state at time t (the loop calls this after every step and after ``start``)."""
+        self.step += 1
+        d = self.disc
+        if self._wanted(t, final):
+            self.last = t
+            self.times.append(t)
+            self.steps.append(self.step)
+            u = d.u.vec.FV().NumPy()
+            self.u_probe.append(d.probe_values())
+            self.u_contact.append(u[d.node_dofs])
+            if d.beta is not None:
+                self.beta.append(d.beta.vec.FV().NumPy()[d.beta_dofs].copy())
+            i = len(self.times) - 1
+            for key, val in scheme.diagnostics().items():
+                self.extra.setdefault(key, []).append(val)
+            for key, arr in scheme.node_values().items():
+                self.node_extra.setdefault(key, []).append(np.asarray(arr))
+            assert all(len(v) == i + 1 for v in self.extra.values()), "diagnostics must be given at every record"
+        if any(abs(t - s) <= self.tol for s in self.snapshot_times):
+            self.snapshot(t, scheme)
 
-    def record(self, step: int, node_values=None, **diagnostics) -> None:
-        d, i = self.disc, self.n_recorded
-        u = d.u.vec.FV().NumPy()
-        self.u_probe[i] = d.probe_values()
-        self.u_contact[i] = u[d.node_dofs]
-        if self.beta is not None:
-            self.beta[i] = d.beta.vec.FV().NumPy()[d.beta_dofs]
-        for key, val in diagnostics.items():
-            self.extra.setdefault(key, np.full(len(self.record_steps), -1, dtype=type(val)))[i] = val
-        for key, arr in (node_values or {}).items():
-            self.node_extra.setdefault(key, np.zeros((len(self.record_steps), len(arr)), dtype=arr.dtype))[i] = arr
-        self.n_recorded += 1
-
-    def snapshot(self, step: int, stress_cf) -> None:
-        """Keep the whole field; ``stress_cf`` is the scheme's sigma_n as a coefficient function."""
-        import ngsolve as ngs
-
-        from .physics.kelvin_voigt import von_mises
+    def snapshot(self, t: float, scheme) -> None:
+        """Keep the whole field: u, the P0 stress sigma_h = P_Q[...] and its von Mises norm."""
+        from .physics.kelvin_voigt import von_mises_cells
 
         d = self.disc
-        q = ngs.L2(d.mesh, order=0)
-        dim = d.dim
-        comps = []
-        for (i, j) in _STRESS_INDEX[dim]:
-            g = ngs.GridFunction(q)
-            g.Set(stress_cf if dim == 1 else stress_cf[i, j])  # local L2 projection = P_Q on P0
-            comps.append(g.vec.FV().NumPy().copy())
-        vm = ngs.GridFunction(q)
-        stress_p0 = _p0_tensor(comps, dim)
-        vm.Set(von_mises(stress_p0(q), dim))
-        self.snaps.append((self.times[step], d.u.vec.FV().NumPy().copy(), np.stack(comps, axis=1),
-                           vm.vec.FV().NumPy().copy()))
+        stress = None
+        for tensor, vector in scheme.stress_parts():
+            part = tensor.apply(d.cell_strains(vector))
+            stress = part if stress is None else stress + part
+        edges = d.edge_values() if d.scene["order"] > 1 else None
+        self.snaps.append((t, d.u.vec.FV().NumPy().copy(), stress, von_mises_cells(stress, d.dim), edges))
 
     def dataset(self, attrs: dict) -> xr.Dataset:
         """The Dataset of everything recorded so far (``attrs`` already netCDF-safe)."""
-        d, n = self.disc, self.n_recorded
+        d = self.disc
         dim = d.dim
         comp = list(COMPONENTS[:dim])
-        steps = self.record_steps[:n]
         probes = np.asarray(d.scene["probes"], dtype=float).reshape(-1, dim)
+        n = len(self.times)
         coords = {
-            "time": _var("time", self.times[steps], "time"),
-            "step": _var("time", steps, "step"),
+            "time": _var("time", np.asarray(self.times, dtype=float), "time"),
+            "step": _var("time", np.asarray(self.steps, dtype=np.int64), "step"),
             "component": _var("component", comp, "component"),
             "probe": _var("probe", np.arange(len(probes)), "probe"),
             "node": _var("node", np.arange(len(d.node_dofs)), "node"),
@@ -183,26 +188,29 @@ class Recorder:
         for c in range(dim):
             coords[f"probe_{COMPONENTS[c]}"] = _var("probe", probes[:, c], f"probe_{COMPONENTS[c]}")
             coords[f"node_{COMPONENTS[c]}"] = _var("node", d.node_xyz[:, c], f"node_{COMPONENTS[c]}")
+        shape = (0, len(probes), dim)
         data = {
-            "u_probe": _var(("time", "probe", "component"), self.u_probe[:n], "u_probe"),
-            "u_contact": _var(("time", "node", "component"), self.u_contact[:n], "u_contact"),
+            "u_probe": _var(("time", "probe", "component"), np.stack(self.u_probe) if n else np.empty(shape), "u_probe"),
+            "u_contact": _var(("time", "node", "component"),
+                              np.stack(self.u_contact) if n else np.empty((0, len(d.node_dofs), dim)), "u_contact"),
         }
-        if self.beta is not None:
-            coords["facet"] = _var("facet", np.arange(self.beta.shape[1]), "facet")
-            for c in range(2 if dim == 3 else 1):  # facets lie on y = 0 (2D) or z = 0 (3D)
-                coords[f"facet_{COMPONENTS[c]}"] = _var("facet", d.facet_xyz[:, c], f"facet_{COMPONENTS[c]}")
-            data["beta"] = _var(("time", "facet"), self.beta[:n], "beta")
-        for key, arr in self.extra.items():
-            data[key] = _var("time", arr[:n], key)
-        for key, arr in self.node_extra.items():
-            data[key] = _var(("time", "node"), arr[:n], key)
+        if d.beta is not None:
+            coords["facet"] = _var("facet", np.arange(len(d.beta_dofs)), "facet")
+            for axis in d.geometry.facet_axes or (0,):
+                coords[f"facet_{COMPONENTS[axis]}"] = _var("facet", d.facet_xyz[:, axis], f"facet_{COMPONENTS[axis]}")
+            data["beta"] = _var(("time", "facet"), np.stack(self.beta) if n else np.empty((0, len(d.beta_dofs))),
+                                "beta")
+        for key, vals in self.extra.items():
+            data[key] = _var("time", np.asarray(vals), key)
+        for key, arrs in self.node_extra.items():
+            data[key] = _var(("time", "node"), np.stack(arrs), key)
         if self.snaps:
             coords["snapshot_time"] = _var("snapshot", np.array([s[0] for s in self.snaps]), "snapshot_time")
             coords["stress_component"] = _var("stress_component", list(STRESS_COMPONENTS[dim]), "stress_component")
             vxyz = d.vertex_xyz
             for c in range(dim):
                 coords[f"vertex_{COMPONENTS[c]}"] = _var("vertex", vxyz[:, c], f"vertex_{COMPONENTS[c]}")
-            data["cell_vertices"] = _var(("cell", "corner"), _cells(d.mesh, dim), "cell_vertices")
+            data["cell_vertices"] = _var(("cell", "corner"), mesh_cells(d.mesh, dim), "cell_vertices")
             data["u_dofs"] = _var(("snapshot", "dof"), np.stack([s[1] for s in self.snaps]), "u_dofs")
             vd = d.vertex_dofs
             data["u_nodes"] = _var(("snapshot", "vertex", "component"),
@@ -210,30 +218,15 @@ class Recorder:
             data["stress"] = _var(("snapshot", "cell", "stress_component"),
                                   np.stack([s[2] for s in self.snaps]), "stress")
             data["von_mises"] = _var(("snapshot", "cell"), np.stack([s[3] for s in self.snaps]), "von_mises")
+            if self.snaps[0][4] is not None:  # order >= 2: the field at the edge midpoints too
+                data["edge_vertices"] = _var(("edge", "end"), d.edges[0], "edge_vertices")
+                data["u_edges"] = _var(("snapshot", "edge", "component"), np.stack([s[4] for s in self.snaps]),
+                                       "u_edges")
         return xr.Dataset(data, coords=coords, attrs=attrs)
 
 
-def _p0_tensor(comps, dim):
-    """A function building sigma as a CF from P0 component vectors on a given L2 space."""
-    import ngsolve as ngs
-
-    def build(q):
-        gfs = []
-        for arr in comps:
-            g = ngs.GridFunction(q)
-            g.vec.FV().NumPy()[:] = arr
-            gfs.append(g)
-        if dim == 1:
-            return gfs[0]
-        full = [[None] * dim for _ in range(dim)]
-        for g, (i, j) in zip(gfs, _STRESS_INDEX[dim]):
-            full[i][j] = full[j][i] = g
-        return ngs.CoefficientFunction(tuple(full[i][j] for i in range(dim) for j in range(dim)), dims=(dim, dim))
-
-    return build
-
-
-def _cells(mesh, dim):
+def mesh_cells(mesh, dim):
+    """Vertex indices (0-based) of every cell of an NGSolve mesh, shape (cell, dim + 1)."""
     ngm = mesh.ngmesh
     elems = {1: ngm.Elements1D, 2: ngm.Elements2D, 3: ngm.Elements3D}[dim]().NumPy()
     return np.array(elems["nodes"][:, : dim + 1], dtype=np.int64) - 1
@@ -247,14 +240,15 @@ ATTR_UNITS = {"h_max": "m", "k_actual": "s", "k_crit": "s", "setup_time": "s", "
               "ndof": "1", "nsteps": "1", "threads": "1", "memory_peak_mb": "MB"}
 
 
-def provenance(scene, extra: dict, call: str = "") -> dict:
+def provenance(scene, extra: dict, call: str = "", terms=None) -> dict:
     """Dataset attributes: CF conventions, every scene parameter with its units (``NAME_units``), the
     discretisation, cost, versions and a ``history`` line with the full command or call."""
     from .parameters import PARAMETERS
 
     attrs = {"Conventions": "CF-1.10", "title": f"workbench run of scene {scene.name}: {scene.description}",
              "scene": scene.name, "base_scene": scene.base, "geometry": scene.geometry,
-             "description": scene.description, "model": scene.model, "terms": ",".join(scene.terms) or "none"}
+             "description": scene.description, "model": scene.model,
+             "terms": ",".join(scene.terms if terms is None else terms) or "none"}
     attrs |= {k: attr_value(v) for k, v in scene.values.items()}
     attrs["parameters_json"] = json.dumps(scene.plain(), sort_keys=True)
     attrs |= {k: attr_value(v) for k, v in extra.items()}

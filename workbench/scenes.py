@@ -1,10 +1,11 @@
 """Scenes: one modelled situation (geometry, material, loads, contact physics) as checked data.
 
-A scene is a geometry (``rod`` 1D, ``slab`` 2D plane stress, ``block`` 3D), a
-model, and a dict of parameter values drawn from :data:`~workbench.parameters.PARAMETERS`.
-Built-in scenes are the bare geometries and the paper's test problems
-``tp1`` … ``tp5``; a TOML file can start from any of them. Every value is
-checked when the scene is made, so nothing runs on bad input.
+A scene is a geometry (``rod`` 1D, ``slab`` 2D, ``block`` 3D: :mod:`workbench.geometry`),
+a model (A or B: :mod:`workbench.models`), and a dict of parameter values drawn from
+:data:`~workbench.parameters.PARAMETERS`. Built-in scenes are the bare geometries, the
+paper's test problems ``tp1`` … ``tp5`` and the Model B scenes; a TOML file can start
+from any of them. Every value is checked when the scene is made, so nothing runs on
+bad input.
 
 Examples
 --------
@@ -19,10 +20,16 @@ workbench.errors.ParameterError: unknown parameter 'gama_nu' for scene 'tp1'; di
 from __future__ import annotations
 
 import math
+import warnings
 from dataclasses import dataclass, field
+from functools import cached_property
 from pathlib import Path
 
-from .parameters import PARAMETERS, ParameterError, closest_name, to_plain
+import numpy as np
+
+from .errors import ParameterError
+from .geometry import GEOMETRIES
+from .parameters import LAW_PARAMETERS, PARAMETERS, Param, closest_name, to_plain
 
 try:  # Python >= 3.11
     import tomllib
@@ -30,45 +37,41 @@ except ModuleNotFoundError:  # pragma: no cover
     import tomli as tomllib
 
 _CONTACT = ("contact", "adhesion", "c_nu", "m_nu", "gap", "gamma_nu", "eps_a", "L", "beta0",
-            "bonding_truncation")
+            "bonding_truncation") + LAW_PARAMETERS
 _TIME = ("T", "k", "scheme", "order", "h", "solver", "allow_unstable")
 _OUTPUT = ("probes", "snapshots")
-_KV2D = ("E", "nu", "a1", "a2")
-
-_LOADS2D = ("body_force", "traction_top", "traction_right", "point_force", "point_force_at")
-_LOADS3D = ("body_force", "traction_top", "traction_right", "traction_front", "traction_back",
-            "point_force", "point_force_at")
+_KV = ("E", "nu", "a1", "a2", "elastic_tensor", "viscous_tensor")
 _TIME_B = ("T", "k", "scheme", "order", "h", "solver")
 _UNILATERAL = ("gap", "F", "c")
 _MEMORY = ("kernel", "kernel_E", "kernel_nu", "prony")
+_LOADS = ("body_force", "point_force", "point_force_at")
+
+
+def _geometry_parameters(kind: str) -> tuple:
+    g = GEOMETRIES[kind]
+    return g.extent_names + g.cell_names
+
+
+def _loads(kind: str) -> tuple:
+    return _LOADS + tuple(f"traction_{side}" for side in GEOMETRIES[kind].boundaries["traction"])
+
 
 #: Parameters each (geometry, model) uses; a scene knows exactly these (plus preset extras).
 MODEL_PARAMETERS = {
     ("rod", "A"): ("length",) + _TIME + ("a", "b") + _CONTACT + ("delta", "u0") + _OUTPUT,
-    ("slab", "A"): ("width", "height", "nx", "ny") + _TIME + _KV2D + _CONTACT + ("c_tau",) + _LOADS2D + _OUTPUT,
-    ("block", "A"): ("width", "depth", "height", "nx", "ny", "nz") + _TIME + _KV2D + _CONTACT + ("c_tau",)
-                    + _LOADS3D + _OUTPUT,
-    ("rod", "B"): ("length",) + _TIME_B + ("a",) + _UNILATERAL + ("kernel", "kernel_E", "prony", "delta")
-                  + _OUTPUT,
-    ("slab", "B"): ("width", "height", "nx", "ny") + _TIME_B + ("E", "nu") + _UNILATERAL + _MEMORY + _LOADS2D
+    ("slab", "A"): _geometry_parameters("slab") + _TIME + ("plane",) + _KV + _CONTACT + ("c_tau",) + _loads("slab")
                    + _OUTPUT,
-    ("block", "B"): ("width", "depth", "height", "nx", "ny", "nz") + _TIME_B + ("E", "nu") + _UNILATERAL + _MEMORY
-                    + _LOADS3D + _OUTPUT,
+    ("block", "A"): _geometry_parameters("block") + _TIME + _KV + _CONTACT + ("c_tau",) + _loads("block") + _OUTPUT,
+    ("rod", "B"): ("length",) + _TIME_B + ("a",) + _UNILATERAL + ("kernel", "kernel_E", "prony", "delta") + _OUTPUT,
+    ("slab", "B"): _geometry_parameters("slab") + _TIME_B + ("plane", "E", "nu", "elastic_tensor") + _UNILATERAL
+                   + _MEMORY + _loads("slab") + _OUTPUT,
+    ("block", "B"): _geometry_parameters("block") + _TIME_B + ("E", "nu", "elastic_tensor") + _UNILATERAL + _MEMORY
+                    + _loads("block") + _OUTPUT,
 }
-#: The schemes each model can run.
-MODEL_SCHEMES = {"A": ("explicit", "implicit"), "B": ("vi",)}
-DIMENSION = {"rod": 1, "slab": 2, "block": 3}
-#: Boundary names per geometry: the clamp (Gamma_1), the contact side (Gamma_3), the loadable rest.
-BOUNDARIES = {
-    "rod": {"clamp": "left", "contact": "right", "traction": ()},
-    "slab": {"clamp": "left", "contact": "bottom", "traction": ("top", "right")},
-    "block": {"clamp": "left", "contact": "bottom", "traction": ("top", "right", "front", "back")},
-}
-DEFAULT_PROBES = {
-    "rod": ((0.25,), (0.5,), (1.0,)),
-    "slab": ((0.25, 0.0), (0.5, 0.0), (0.75, 0.0), (1.0, 0.0), (1.0, 0.1)),
-    "block": ((0.25, 0.1, 0.0), (0.5, 0.1, 0.0), (0.75, 0.1, 0.0), (1.0, 0.1, 0.0), (1.0, 0.1, 0.1)),
-}
+
+#: Parameters a model refuses with a reason (rather than as merely unknown).
+_NOT_APPLICABLE = {"B": {"u0": "without viscosity the problem is quasistatic in u, so u(0) is the solution of the "
+                               "inequality at t = 0 (computed), not an initial condition"}}
 
 
 @dataclass(frozen=True)
@@ -87,19 +90,13 @@ def _tp3_delta(v):
     return {"delta": f"{v['delta_amp']!r}*sin({v['omega']!r}*t)"}
 
 
-def _extra(name, default, unit, meaning, **kw):
-    from .parameters import Param
-    return Param(name, default, unit, meaning, "float", **kw)
-
-
 _ROD_PAPER = dict(h=0.01, k=0.01, T=1.0, a=1.0, b=1.0, eps_a=0.0, beta0=1.0,
                   snapshots=(0.2, 0.4, 0.6, 0.8, 1.0))
 _SLAB_PAPER = dict(E=1000.0, nu=0.3, a1=30.0, a2=20.0, c_nu=1.0, gamma_nu=0.3, L=0.3, eps_a=0.0,
                    beta0=1.0, c_tau=0.0, T=1.0, snapshots=(0.1, 0.4, 0.6, 0.7, 0.8, 1.0))
 
 _MEMORY_ROD = dict(h=0.05, k=0.01, T=1.0, a=1.0, gap=0.1, F=0.05, c=1.0, scheme="vi",
-                   prony=((0.5, 0.2),), delta="0.3*sin(2*pi*t) - 0.05",
-                   snapshots=(0.25, 0.5, 0.75, 1.0))
+                   prony=((0.5, 0.2),), delta="0.3*sin(2*pi*t) - 0.05", snapshots=(0.25, 0.5, 0.75, 1.0))
 _MEMORY_2D = dict(width=2.0, height=1.0, h=0.05, k=0.02, T=1.0, E=1000.0, nu=0.3, scheme="vi",
                   gap=0.02, F=20.0, c=2000.0, prony=((-1000.0, 0.3, 0.5),),
                   traction_top="(0, -60*t*ifpos(x - 1, 1, -0.25))", snapshots=(0.25, 0.5, 0.75, 1.0))
@@ -111,16 +108,16 @@ PRESETS: dict[str, Preset] = {
                    dict(h=0.0125, k=0.001, traction_top="(0, t)")),
     "block": Preset("block", "3D block (0, width) x (0, depth) x (0, height), clamped at x = 0, adhesive contact on z = 0",
                     dict(h=0.05, order=2, k=0.001, traction_top="(0, 0, t)")),  # P1 locks: tip 50 % low at h = 0.05
-    "tp1": Preset("rod", "Paper test problem 1: rod end held at -0.6, case (b) A + delta < -L; exact solution (SPEC)",
-                  dict(_ROD_PAPER, gamma_nu=0.3, L=0.3, delta="-0.6", u0="-0.6")),
+    "tp1": Preset("rod", "Paper test problem 1: rod end held at -0.6, case (b) A + delta < -L; exact solution "
+                  "(docs/models.md)", dict(_ROD_PAPER, gamma_nu=0.3, L=0.3, delta="-0.6", u0="-0.6")),
     "tp2": Preset("rod", "Paper test problem 2: rod end held at -0.1, case (a) -L <= A + delta < 0; reduced ODE reference",
                   dict(_ROD_PAPER, gamma_nu=0.1, L=1.0, delta="-0.1", u0="-0.1")),
     "tp3": Preset("rod", "Paper test problem 3: periodic end displacement delta_amp sin(omega t); debonding only in tension",
                   dict(_ROD_PAPER, T=5.0, gamma_nu=0.3, L=0.3, u0="0", c_nu=1.0, bonding_truncation="tension",
                        snapshots=(1.0, 2.0, 3.0, 4.0, 5.0)),
-                  extras={"delta_amp": _extra("delta_amp", 0.05, "m", "amplitude of delta(t) (not in the paper)"),
-                          "omega": _extra("omega", 10.0, "1/s", "angular frequency of delta(t) (OCR: sin 10t)",
-                                          lower=0.0, lower_open=True)},
+                  extras={"delta_amp": Param("delta_amp", 0.05, "m", "amplitude of delta(t) (not in the paper)"),
+                          "omega": Param("omega", 10.0, "1/s", "angular frequency of delta(t) (OCR: sin 10t)",
+                                         lower=0.0, lower_open=True)},
                   derive=_tp3_delta),
     "tp4": Preset("slab", "Paper test problem 4: slab pulled up by a point force (0, 1) at the top-right corner",
                   dict(_SLAB_PAPER, h=0.0125, k=0.01, point_force="(0, 1)", point_force_at=((1.0, 0.1),))),
@@ -129,7 +126,7 @@ PRESETS: dict[str, Preset] = {
                        bonding_truncation="tension")),
     "memory_rod": Preset("rod", "Model B: rod with long memory (Prony term), end x = 0 moved by delta(t), unilateral "
                          "contact with a compliant layer of thickness gap at x = length", _MEMORY_ROD, model="B"),
-    "memory_slab": Preset("slab", "Model B: block (0,2) x (0,1) with long memory, clamped at x = 0, pressed down on "
+    "memory_slab": Preset("slab", "Model B: 2D body (0,2) x (0,1) with long memory, clamped at x = 0, pressed down on "
                           "its right half and lifted on its left half; layer of thickness gap on y = 0",
                           _MEMORY_2D, model="B"),
     "memory_block": Preset("block", "Model B: 3D block (0,2) x (0,0.5) x (0,1) with long memory, loaded as "
@@ -146,12 +143,20 @@ class Scene:
     Attributes
     ----------
     name : str
-        Built-in name or TOML file stem.
+        Built-in name or TOML file stem (or its ``name``).
     geometry : str
-        ``rod``, ``slab`` or ``block``.
+        ``rod``, ``slab`` or ``block`` (the body itself: :attr:`body`).
     values : dict
         Every parameter the scene uses, checked (expressions parsed).
     description : str
+    set_by_user : frozenset
+        The names given as overrides (the rest are the preset's).
+    base : str
+        The built-in scene this one starts from.
+    model : str
+        ``"A"`` or ``"B"`` (what the values mean: :meth:`model_of`).
+    source : str
+        The TOML file it was read from ('' for a built-in scene).
     """
 
     name: str
@@ -161,40 +166,35 @@ class Scene:
     set_by_user: frozenset = frozenset()
     base: str = ""
     model: str = "A"
+    source: str = ""
 
     def __getitem__(self, key):
         return self.values[key]
 
     @property
     def dim(self) -> int:
-        return DIMENSION[self.geometry]
+        return GEOMETRIES[self.geometry].dim
+
+    @cached_property
+    def body(self):
+        """The geometry object (:mod:`workbench.geometry`) of this scene's values."""
+        return GEOMETRIES[self.geometry].from_values(self.values)
+
+    def model_of(self):
+        """The physics objects of this scene (:func:`workbench.models.from_scene`)."""
+        from .models import from_scene
+
+        return from_scene(self)
 
     @property
     def terms(self) -> tuple:
-        """The terms this scene declares; only these are assembled.
-
-        Model A: ``compliance`` (normal compliance p_nu), ``adhesion`` (bonding
-        field beta, adhesive pull and the bonding ODE), ``glue`` (tangential glue
-        c_tau beta R*(u_tau)). Model B: ``unilateral`` (the constraint u_nu <= gap
-        with the layer psi) and ``memory`` (a nonzero relaxation kernel).
-        """
-        v = self.values
-        if self.model == "B":
-            memory = bool(v["prony"]) or not v["kernel"].is_zero() and v["kernel_E"] != 0
-            return ("unilateral",) + (("memory",) if memory else ())
-        out = []
-        if v["contact"] and v["c_nu"] > 0:
-            out.append("compliance")
-        if v["adhesion"]:
-            out.append("adhesion")
-            if self.dim > 1 and v.get("c_tau", 0.0) > 0:
-                out.append("glue")
-        return tuple(out)
+        """The terms this scene declares; only these are assembled (see :mod:`workbench.models`)."""
+        return self.model_of().terms
 
     def with_(self, **overrides) -> "Scene":
         """A new scene with some values changed (checked again)."""
         user = {k: self.values[k] for k in self.set_by_user}
-        return make(self.name, user | overrides, base=self.base, description=self.description)
+        return make(self.name, user | overrides, base=self.base, description=self.description, source=self.source)
 
     def plain(self) -> dict:
         """Values as JSON-able data (expressions as text)."""
@@ -203,13 +203,22 @@ class Scene:
     def table(self):
         """Rows (name, value, unit, allowed, meaning) for ``workbench show``."""
         params = _known(self.base)
-        return [(n, to_plain(self.values[n]), params[n].unit, params[n].range_text(), params[n].meaning)
-                for n in self.values]
+        rows = []
+        for n in self.values:
+            allowed = params[n].range_text()
+            if n == "scheme":
+                allowed = " | ".join(repr(s) for s in schemes_of(self.model))
+            elif n == "order" and self.model == "B":
+                allowed = "1"
+            rows.append((n, to_plain(self.values[n]), params[n].unit, allowed, params[n].meaning))
+        return rows
 
 
-#: Parameters a model refuses with a reason (rather than as merely unknown).
-_NOT_APPLICABLE = {"B": {"u0": "without viscosity the problem is quasistatic in u, so u(0) is the solution of the "
-                               "inequality at t = 0 (computed), not an initial condition"}}
+def schemes_of(model: str) -> tuple:
+    """The scheme names a model can run (the registry: :data:`workbench.schemes.REGISTRY`)."""
+    from .schemes import REGISTRY
+
+    return tuple(name for name, (_, _, kind) in REGISTRY.items() if kind == model)
 
 
 def _known(base):
@@ -222,12 +231,13 @@ def names() -> list[str]:
     return list(PRESETS)
 
 
-def make(name: str, overrides: dict | None = None, *, base: str | None = None, description: str = "") -> Scene:
+def make(name: str, overrides: dict | None = None, *, base: str | None = None, description: str = "",
+         source: str = "") -> Scene:
     """Build and check a built-in scene (``base`` defaults to ``name``) with ``overrides``."""
     base = base or name
     if base not in PRESETS:
         raise ParameterError(f"unknown scene {base!r}; built-in scenes: {', '.join(PRESETS)}"
-                             + closest_name(base, PRESETS) + " (or give a .toml file)")
+                             + closest_name(str(base), PRESETS) + " (or give a .toml file)")
     preset = PRESETS[base]
     known = _known(base)
     overrides = dict(overrides or {})
@@ -242,75 +252,102 @@ def make(name: str, overrides: dict | None = None, *, base: str | None = None, d
         checked_extras = {n: known[n].check(raw[n]) for n in preset.extras}
         derived = preset.derive(checked_extras)
         raw |= {k: v for k, v in derived.items() if k not in overrides}
-    dim = DIMENSION[preset.geometry]
-    values = {n: known[n].check(raw[n], size=dim) for n in known}
+    geometry = GEOMETRIES[preset.geometry]
+    values = {n: known[n].check(raw[n], size=geometry.dim) for n in known}
+    body = geometry.from_values(values)
     if not values["probes"]:
-        values["probes"] = _default_probes(preset.geometry, values)
+        values["probes"] = body.default_probes()
     if "snapshots" not in overrides:  # preset snapshot times beyond a shortened T are dropped
         values["snapshots"] = tuple(t for t in values["snapshots"] if t <= values["T"])
     if "point_force_at" in values and not values["point_force_at"]:
-        values["point_force_at"] = (_default_probes(preset.geometry, values)[-1],)
+        values["point_force_at"] = (body.default_probes()[-1],)
     if "scheme" not in overrides and preset.model == "B":
         values["scheme"] = "vi"
-    _check_consistency(name, preset.geometry, values, preset.model)
+    _check_consistency(name, body, values, preset.model)
     return Scene(name, preset.geometry, values, description or preset.description, frozenset(overrides), base,
-                 preset.model)
+                 preset.model, source)
 
 
-def _default_probes(geometry, v):
-    if geometry == "rod":
-        return tuple((f * v["length"],) for f in (0.25, 0.5, 1.0))
-    if geometry == "slab":
-        W, H = v["width"], v["height"]
-        return ((0.25 * W, 0.0), (0.5 * W, 0.0), (0.75 * W, 0.0), (W, 0.0), (W, H))
-    W, D, H = v["width"], v["depth"], v["height"]
-    return ((0.25 * W, D / 2, 0.0), (0.5 * W, D / 2, 0.0), (0.75 * W, D / 2, 0.0), (W, D / 2, 0.0), (W, D / 2, H))
+#: Above this many time steps a run is refused (a typing slip such as k = 1e-300 or T = 1e9).
+MAX_STEPS = 10**8
 
 
-def _extent(geometry, v):
-    if geometry == "rod":
-        return (v["length"],)
-    if geometry == "slab":
-        return (v["width"], v["height"])
-    return (v["width"], v["depth"], v["height"])
-
-
-def _check_consistency(name, geometry, v, model="A"):
+def _check_consistency(name, body, v, model="A"):
     """Checks that involve several parameters."""
-    if v["scheme"] not in MODEL_SCHEMES[model]:
+    allowed = schemes_of(model)
+    if v["scheme"] not in allowed:
         raise ParameterError(f"scheme = {v['scheme']!r} does not apply to a Model {model} scene; "
-                             f"allowed: {' | '.join(repr(s) for s in MODEL_SCHEMES[model])}")
+                             f"allowed: {' | '.join(repr(s) for s in allowed)}")
     if model == "B":
-        _check_memory(geometry, v)
+        _check_memory(body, v)
         if v["order"] != 1:
             raise ParameterError(f"order = {v['order']}: Model B constrains the contact vertices (K_h), so order must "
                                  "be 1")
     if v["k"] > v["T"]:
         raise ParameterError(f"k = {v['k']:g} is larger than T = {v['T']:g}; allowed: 0 < k <= T")
-    ext = _extent(geometry, v)
-    if v["h"] > max(ext):
-        raise ParameterError(f"h = {v['h']:g} is larger than the body ({max(ext):g}); allowed: 0 < h <= {max(ext):g}")
-    tol = 1e-12 * max(ext)
+    steps = v["T"] / v["k"]
+    if steps > MAX_STEPS:
+        raise ParameterError(f"k = {v['k']:g} and T = {v['T']:g} make {steps:.3g} time steps; at most {MAX_STEPS:.0e} "
+                             "are allowed (check the values of k and T)")
+    if v["h"] > body.size:
+        raise ParameterError(f"h = {v['h']:g} is larger than the body ({body.size:g}); "
+                             f"allowed: 0 < h <= {body.size:g}")
     for key in ("probes", "point_force_at"):
         for p in v.get(key, ()):
-            if len(p) != len(ext) or any(c < -tol or c > e + tol for c, e in zip(p, ext)):
-                box = " x ".join(f"[0, {e:g}]" for e in ext)
-                raise ParameterError(f"{key}: point {p} is not inside the body {box}")
+            body.check_point(key, p)
     bad = [t for t in v["snapshots"] if t > v["T"] * (1 + 1e-12)]
     if bad:
         raise ParameterError(f"snapshots: time {bad[0]:g} is after T = {v['T']:g}; allowed: 0 <= t <= T")
-    if geometry == "rod" and "u0" in v:
+    for key in ("elastic_tensor", "viscous_tensor"):
+        if v.get(key):
+            from .physics.kelvin_voigt import Voigt
+
+            Voigt(v[key], body.dim, key)  # checks shape, symmetry, definiteness
+    _check_expressions(body, v)
+    if body.dim == 1 and "u0" in v:
         u0_at_0, d0 = v["u0"](x=0.0), v["delta"](t=0.0)
         if not math.isclose(u0_at_0, d0, rel_tol=1e-12, abs_tol=1e-12):
             raise ParameterError(f"u0 = {v['u0']} gives u0(0) = {u0_at_0:g} but delta(0) = {d0:g}; "
                                  "the initial displacement must match the prescribed end (compatibility)")
 
 
-def _check_memory(geometry, v):
-    width = 2 if geometry == "rod" else 3
+def _check_expressions(body, v):
+    """Every expression is finite on the body at a few times in [0, T] (a division by zero fails here, not later)."""
+    from .expressions import Expression
+
+    coordinates = set("xyz"[: body.dim])
+    for key, expr in v.items():
+        if isinstance(expr, Expression):
+            extra = sorted(expr.variables - coordinates - {"t"})
+            if extra:
+                raise ParameterError(f"in {key} = {_clip(expr.source)}: {extra[0]!r} is not a coordinate of a "
+                                     f"{body.kind} (allowed: {', '.join(sorted(coordinates) + ['t'])})")
+    times = np.linspace(0.0, v["T"], 11)
+    corners = np.array(np.meshgrid(*[[0.0, 0.5 * e, e] for e in body.extent], indexing="ij")).reshape(body.dim, -1)
+    coords = dict(zip("xyz", corners))
+    for key, expr in v.items():
+        if not isinstance(expr, Expression):
+            continue
+        for t in times:
+            try:
+                with np.errstate(all="ignore"):
+                    value = np.asarray(expr(t=t, **coords), dtype=float)
+            except (ZeroDivisionError, OverflowError, ValueError, FloatingPointError):
+                value = np.array([np.nan])
+            if not np.all(np.isfinite(value)):
+                where = f"t = {t:g}" + ("" if not expr.variables & {"x", "y", "z"} else " somewhere in the body")
+                raise ParameterError(f"{key} = {_clip(expr.source)} is not finite at {where}")
+
+
+def _clip(text: str, n: int = 60) -> str:
+    return repr(text) if len(text) <= n else repr(text[:n - 3] + "...")
+
+
+def _check_memory(body, v):
+    rod = body.dim == 1
     for i, term in enumerate(v["prony"]):
-        if len(term) not in (width, 3) or (geometry != "rod" and len(term) != 3):
-            want = "(E_i, tau_i)" if geometry == "rod" else "(E_i, nu_i, tau_i)"
+        if len(term) != (2 if rod else 3):
+            want = "(E_i, tau_i)" if rod else "(E_i, nu_i, tau_i)"
             raise ParameterError(f"prony: term {i} = {term} must be {want}")
         tau = term[-1]
         if not tau > 0:
@@ -320,6 +357,12 @@ def _check_memory(geometry, v):
     if v["prony"] and not v["kernel"].is_zero():
         raise ParameterError("give the memory either as kernel (quadrature, O(n) work per step) or as prony "
                              "(exact recursion, O(1)), not both")
+    if not v["kernel"].is_zero() and v["kernel_E"] == 0:
+        raise ParameterError(f"kernel = {v['kernel']} has no effect with kernel_E = 0: give kernel_E, the modulus "
+                             "of the kernel tensor (negative for relaxation)")
+
+
+_TOML_KEYS = {"scene", "name", "description", "parameters", "traction"}
 
 
 def from_toml(path, overrides: dict | None = None) -> Scene:
@@ -328,49 +371,82 @@ def from_toml(path, overrides: dict | None = None) -> Scene:
     The file names a built-in ``scene`` to start from, optionally a ``name`` and
     ``description``, a ``[parameters]`` table, and a ``[traction]`` table keyed by
     boundary name (``top = "(0, -1)"`` sets ``traction_top``). Unknown keys,
-    parameters or boundaries are errors.
+    parameters or boundaries are errors, and so is a load given in both tables.
     """
     path = Path(path)
+    label = str(path)
     try:
-        data = tomllib.loads(path.read_text())
+        raw = path.read_bytes()
     except FileNotFoundError:
-        raise ParameterError(f"scene file {str(path)!r} not found") from None
+        raise ParameterError(f"scene file {label!r} not found") from None
+    except IsADirectoryError:
+        raise ParameterError(f"scene file {label!r} is a directory, not a TOML file") from None
+    except OSError as err:
+        raise ParameterError(f"scene file {label!r} cannot be read: {err.strerror}") from None
+    try:
+        data = tomllib.loads(raw.decode("utf-8"))
+    except UnicodeDecodeError:
+        raise ParameterError(f"scene file {label!r} is not a text (UTF-8 TOML) file") from None
     except tomllib.TOMLDecodeError as err:
-        raise ParameterError(f"scene file {str(path)!r}: {err}") from None
-    allowed = {"scene", "name", "description", "parameters", "traction"}
+        raise ParameterError(f"scene file {label!r}: {err}") from None
     for key in data:
-        if key not in allowed:
-            raise ParameterError(f"{path.name}: unknown top-level key {key!r}; allowed: {', '.join(sorted(allowed))}"
-                                 + closest_name(key, allowed))
+        if key not in _TOML_KEYS:
+            raise ParameterError(f"{path.name}: unknown top-level key {key!r}; allowed: {', '.join(sorted(_TOML_KEYS))}"
+                                 + closest_name(key, _TOML_KEYS))
     base = data.get("scene")
     if base is None:
         raise ParameterError(f"{path.name}: give the built-in scene to start from, e.g. scene = \"slab\"")
+    if not isinstance(base, str):
+        raise ParameterError(f"{path.name}: scene = {base!r} must be the name of a built-in scene, e.g. scene = \"slab\"")
     if base not in PRESETS:
         raise ParameterError(f"{path.name}: unknown scene {base!r}; built-in scenes: {', '.join(PRESETS)}"
-                             + closest_name(str(base), PRESETS))
+                             + closest_name(base, PRESETS))
+    for key in ("parameters", "traction"):
+        if key in data and not isinstance(data[key], dict):
+            raise ParameterError(f"{path.name}: {key} must be a table ([{key}] with name = value lines), "
+                                 f"got {data[key]!r}")
+    for key in ("name", "description"):
+        if key in data and not isinstance(data[key], str):
+            raise ParameterError(f"{path.name}: {key} must be text, got {data[key]!r}")
     values = dict(data.get("parameters", {}))
-    sides = BOUNDARIES[PRESETS[base].geometry]["traction"]
+    sides = GEOMETRIES[PRESETS[base].geometry].boundaries["traction"]
     for side, load in data.get("traction", {}).items():
         if side not in sides:
             raise ParameterError(f"{path.name}: unknown boundary {side!r} in [traction] for a {PRESETS[base].geometry}; "
                                  f"loadable boundaries: {', '.join(sides) or 'none'}" + closest_name(side, sides))
+        if f"traction_{side}" in values:
+            raise ParameterError(f"{path.name}: traction_{side} is given twice ([parameters] traction_{side} and "
+                                 f"[traction] {side}); give it once")
         values[f"traction_{side}"] = load
     values |= dict(overrides or {})
     name = data.get("name", path.stem)
     try:
-        return make(name, values, base=base, description=data.get("description", ""))
+        return make(name, values, base=base, description=data.get("description", ""), source=str(path.resolve()))
     except ParameterError as err:
         raise ParameterError(f"{path.name}: {err}") from None
 
 
+def _looks_like_path(text: str) -> bool:
+    return text.endswith(".toml") or "/" in text or "\\" in text
+
+
 def scene(name_or_path, **overrides) -> Scene:
-    """A scene from a built-in name, a TOML path or an existing :class:`Scene`, with overrides."""
+    """A scene from a built-in name, a TOML path or an existing :class:`Scene`, with overrides.
+
+    A built-in name always means the built-in scene; a file of that name in the working
+    directory is read only when given as a path (``./tp1``), and a warning says so.
+    """
     if isinstance(name_or_path, Scene):
         return name_or_path.with_(**overrides) if overrides else name_or_path
     text = str(name_or_path)
-    if text.endswith(".toml") or Path(text).is_file():
+    if text in PRESETS:
+        if Path(text).is_file():
+            warnings.warn(f"scene {text!r}: using the built-in scene; the file ./{text} in this folder is not read "
+                          f"(give it as ./{text} to use the file)", RuntimeWarning, stacklevel=2)
+        return make(text, overrides)
+    if _looks_like_path(text) or Path(text).is_file():
         return from_toml(text, overrides)
     return make(text, overrides)
 
 
-__all__ = ["Scene", "scene", "names", "make", "from_toml", "PRESETS", "BOUNDARIES", "ParameterError"]
+__all__ = ["Scene", "scene", "names", "make", "from_toml", "PRESETS", "MODEL_PARAMETERS", "ParameterError"]

@@ -2,11 +2,10 @@
 
 The scheme advances u' = K_A^{-1} (F - K_G u - j(u)): forward Euler on the
 elastic and contact terms, so (linearised) it is stable for
-k < k_crit = 2 / lambda_max(K_A^{-1} (K_G + D)), where D is the boundary
-spring matrix at the largest slopes the contact terms can have:
-c_nu m_nu r^(m_nu - 1) for the compliance (r = L when m_nu > 1), gamma_nu beta0^2
-for the adhesive pull, on the normal component, and c_tau beta0 for the glue on
-the tangential one. lambda_max comes from Lanczos (SciPy ``eigsh``) on the
+k < k_crit = 2 / lambda_max(K_A^{-1} (K_G + D)), where D is the boundary spring
+matrix at the largest slopes the contact terms can have (each term says its own:
+:meth:`workbench.physics.contact.ContactTerm.max_slope`) on the normal and the
+tangential components. lambda_max comes from Lanczos (SciPy ``eigsh``) on the
 generalised problem with the factored K_A.
 
 Examples
@@ -22,11 +21,13 @@ from dataclasses import dataclass
 
 import ngsolve as ngs
 import numpy as np
-from scipy.sparse.linalg import LinearOperator, eigsh
+from scipy.sparse.linalg import ArpackError, ArpackNoConvergence, LinearOperator, eigsh
 
-from . import discretisation, solvers
-from .errors import StepTooLarge
-from .physics import contact
+from . import solvers
+from .errors import ParameterError, StepTooLarge
+from .physics import kelvin_voigt
+
+__all__ = ["Estimate", "critical_step", "check", "StepTooLarge"]
 
 
 @dataclass(frozen=True)
@@ -37,38 +38,25 @@ class Estimate:
     spring_tangential: float
 
 
-def boundary_springs(scene) -> tuple[float, float]:
-    """Largest slopes (normal, tangential) of the declared contact terms."""
-    v, terms = scene.values, scene.terms
-    normal = 0.0
-    if "compliance" in terms:
-        normal = v["c_nu"] * v["m_nu"] * (v["L"] ** (v["m_nu"] - 1.0) if v["m_nu"] != 1 else 1.0)
-    if "adhesion" in terms:
-        normal = max(normal, v["gamma_nu"] * v["beta0"] ** 2)
-    tangential = v["c_tau"] * v["beta0"] if "glue" in terms else 0.0
-    return normal, tangential
+def critical_step(disc_or_scene, solver=None) -> Estimate:
+    """Predict k_crit for the explicit scheme on a discretisation (or a scene, discretised here).
 
-
-def critical_step(scene, d=None, solver=None) -> Estimate:
-    """Predict k_crit for the explicit scheme on ``scene``.
-
-    ``d`` (an existing discretisation) and ``solver`` (its factored K_A, e.g. the
-    explicit scheme's) avoid rebuilding and refactoring.
+    ``solver`` (the factored K_A, e.g. the explicit scheme's) avoids refactoring.
     """
-    d = d or discretisation.build(scene)
-    s_nu, s_tau = boundary_springs(scene)
-    u, w = d.fes.TnT()
-    from .physics import kelvin_voigt
+    from . import discretisation
+    from .scenes import Scene
 
-    _, G = kelvin_voigt.tensors(scene)
+    d = discretisation.build(disc_or_scene) if isinstance(disc_or_scene, Scene) else disc_or_scene
+    model = d.model
+    s_nu, s_tau = model.contact.max_slope(model.beta0)
+    u, w = d.fes.TnT()
     stiff = ngs.BilinearForm(d.fes, symmetric=True)
-    stiff += kelvin_voigt.energy_product(G, u, w, d.dim) * ngs.dx
+    stiff += kelvin_voigt.energy_product(model.elastic, u, w, d.dim) * ngs.dx
     if s_nu > 0 or s_tau > 0:
-        n = contact.outward_normal(d.dim)
-        u_nu, u_tau = contact.normal_and_tangential(u, n, d.dim)
-        w_nu, w_tau = contact.normal_and_tangential(w, n, d.dim)
+        u_nu, u_tau = d._normal_and_tangential(u)
+        w_nu, w_tau = d._normal_and_tangential(w)
         spring = s_nu * u_nu * w_nu
-        if s_tau > 0:
+        if s_tau > 0 and u_tau is not None:
             spring = spring + s_tau * ngs.InnerProduct(u_tau, w_tau)
         stiff += spring * ngs.ds(d.contact_name)
     stiff.Assemble()
@@ -84,16 +72,24 @@ def critical_step(scene, d=None, solver=None) -> Estimate:
         return full_out[free].copy()
 
     n = free.size
-    if n <= 3:
-        lam = float(np.max(np.real(np.linalg.eigvals(np.linalg.solve(KA.toarray(), K.toarray())))))
-    else:
-        Minv = LinearOperator((n, n), matvec=apply_inverse, dtype=float)
-        lam = float(eigsh(K, k=1, M=KA, Minv=Minv, which="LM", tol=1e-4, return_eigenvectors=False,
-                          v0=np.ones(n))[0])
+    try:
+        if n <= 3:
+            lam = float(np.max(np.real(np.linalg.eigvals(np.linalg.solve(KA.toarray(), K.toarray())))))
+        else:
+            Minv = LinearOperator((n, n), matvec=apply_inverse, dtype=float)
+            lam = float(eigsh(K, k=1, M=KA, Minv=Minv, which="LM", tol=1e-4, return_eigenvectors=False,
+                              v0=np.ones(n))[0])
+    except (ArpackError, ArpackNoConvergence, np.linalg.LinAlgError) as err:
+        raise ParameterError(f"the explicit scheme's step limit k_crit cannot be estimated for these values (the "
+                             f"eigenvalue iteration failed: {str(err).splitlines()[0][:80]}); check the moduli "
+                             "(E, a1, a2, c_nu, gamma_nu) or use scheme = 'implicit'") from None
+    if not np.isfinite(lam) or lam <= 0:
+        raise ParameterError(f"the explicit scheme's step limit k_crit is not finite for these values (lambda_max = "
+                             f"{lam:.3g}); check the moduli (E, a1, a2, c_nu, gamma_nu) or use scheme = 'implicit'")
     return Estimate(2.0 / lam, lam, s_nu, s_tau)
 
 
-def check(scene, k: float, estimate: Estimate) -> None:
+def check(k: float, estimate: Estimate) -> None:
     """Raise :class:`StepTooLarge` with the estimate and the ways out when k > k_crit."""
     if k > estimate.k_crit:
         raise StepTooLarge(

@@ -17,36 +17,30 @@ Norms (SPEC, Corollary 6.7): |u|_V = ||eps(u)||_L2(Omega), |sigma|_Q = ||sigma||
 """
 from __future__ import annotations
 
+from functools import lru_cache
+
 import ngsolve as ngs
 import numpy as np
 import scipy.sparse as sp
 
-from . import meshes
 from .discretisation import bonding_space
 from .physics import kelvin_voigt
-from .scenes import BOUNDARIES
-
-
-def _scene_key(scene):
-    cells = meshes.cells(scene)
-    v = scene.values
-    return (scene.geometry, cells, v.get("length"), v.get("width"), v.get("depth"), v.get("height"), v["order"])
+from .results import mesh_cells
 
 
 class MeshInfo:
-    """A run's mesh with the arrays the transfer needs (rebuilt from the scene: meshes are deterministic)."""
+    """A run's mesh with the arrays the transfer needs (rebuilt from its geometry: meshes are deterministic)."""
 
-    def __init__(self, scene):
-        self.scene = scene
-        self.dim = scene.dim
-        self.order = scene["order"]
-        self.mesh = meshes.build(scene)
+    def __init__(self, geometry, order: int):
+        self.geometry = geometry
+        self.dim = geometry.dim
+        self.order = order
+        self.mesh = geometry.mesh()
         ngm = self.mesh.ngmesh
         self.xyz = np.array(ngm.Coordinates())[:, : self.dim]
-        elems = {1: ngm.Elements1D, 2: ngm.Elements2D, 3: ngm.Elements3D}[self.dim]().NumPy()
-        self.cells = np.array(elems["nodes"][:, : self.dim + 1], dtype=np.int64) - 1
+        self.cells = mesh_cells(self.mesh, self.dim)
         self.centroids = self.xyz[self.cells].mean(axis=1)
-        self.contact = BOUNDARIES[scene.geometry]["contact"]
+        self.contact = geometry.boundaries["contact"]
         self.fes = (ngs.H1 if self.dim == 1 else ngs.VectorH1)(self.mesh, order=self.order)
         self.p0 = ngs.L2(self.mesh, order=0)
         self.bspace, self.beta_dofs, self.facet_measure, self.facet_xyz = bonding_space(self.mesh, self.dim, self.contact)
@@ -86,23 +80,23 @@ class MeshInfo:
         return np.abs(np.linalg.det(T)) * fact if self.dim > 1 else np.abs(T[:, 0, 0])
 
 
-_CACHE: dict = {}
-
-
 def mesh_info(scene) -> MeshInfo:
-    """The (cached) MeshInfo of a scene's mesh."""
-    key = _scene_key(scene)
-    if key not in _CACHE:
-        if len(_CACHE) >= 16:
-            _CACHE.pop(next(iter(_CACHE)))
-        _CACHE[key] = MeshInfo(scene)
-    return _CACHE[key]
+    """The (cached) MeshInfo of a scene's mesh: keyed by everything that determines it (geometry, cells, order)."""
+    body = scene.body
+    return _mesh_info(body.kind, body.extent, body.cells(), scene["order"])
+
+
+@lru_cache(maxsize=16)
+def _mesh_info(kind, extent, cells, order) -> MeshInfo:
+    from .geometry import GEOMETRIES
+
+    cls = GEOMETRIES[kind]
+    return MeshInfo(cls(h=1.0, cells=cells, **dict(zip(cls.extent_names, extent))), order)
 
 
 def nested(coarse: MeshInfo, fine: MeshInfo) -> bool:
     """True when every coarse cell count divides the fine one (structured meshes are then nested)."""
-    c, f = meshes.cells(coarse.scene), meshes.cells(fine.scene)
-    return all(fi % ci == 0 for ci, fi in zip(c, f))
+    return coarse.geometry.nested_in(fine.geometry)
 
 
 class Transfer:

@@ -1,22 +1,23 @@
-"""ParaView files from a result Dataset: XML ``.vtu`` per snapshot plus ``.pvd`` time collections.
+"""ParaView files from a result Dataset: ``.vtu`` per snapshot (written by meshio) plus ``.pvd`` time collections.
 
-Pure numpy and the standard library (ASCII XML VTK, readable by ParaView and VisIt).
 For a Dataset with snapshots, :func:`export` writes, for snapshot ``i`` (time ``t_i``):
 
-* ``{stem}_{i:04d}.vtu`` — the mesh: vertex coordinates padded to 3D; cells
-  ``VTK_LINE`` (3) in 1D, ``VTK_TRIANGLE`` (5) in 2D, ``VTK_TETRA`` (10) in 3D;
-  point data ``displacement`` (3-vector, padded with zeros); cell data
-  ``von_mises`` and ``stress`` (the P0 components named by ``stress_component``);
-  field data ``TimeValue`` = t_i.
-* ``{stem}_contact_{i:04d}.vtu`` (only if the result has ``beta``) — the contact
-  boundary Gamma_3 as its own grid: its facets as cells (``VTK_VERTEX`` (1) for the
-  rod end, ``VTK_LINE`` in 2D, ``VTK_TRIANGLE`` in 3D), point data ``displacement``,
-  cell data ``beta`` taken at the *recorded time nearest to t_i* (beta is recorded on
-  the ``time`` axis, not with the snapshots; the time used is field data ``BetaTime``).
+* ``{stem}_{i:04d}.vtu`` — the mesh with point data ``displacement`` (a 3-vector,
+  padded with zeros) and cell data ``von_mises`` and ``stress`` (the P0 components
+  named by ``stress_component``); field data ``TimeValue`` = t_i. A P1 run gives
+  linear cells (line, triangle, tetra); a run of order 2 or more gives quadratic
+  cells (line3, triangle6, tetra10) whose edge-midpoint nodes carry the field's own
+  values there (``u_edges``), so ParaView draws the P2 field, not its P1 interpolant.
+* ``{stem}_contact_{i:04d}.vtu`` — the contact boundary Gamma_3 as its own grid: its
+  facets as cells (a vertex for the rod end, lines in 2D, triangles in 3D), point
+  data ``displacement`` and, for Model B, ``contact_pressure`` and ``contact_state``
+  (at the recorded time nearest to t_i), cell data ``beta`` for Model A with
+  adhesion (likewise; the time used is field data ``RecordTime``).
 * ``{stem}.pvd`` and ``{stem}_contact.pvd`` — collections listing the files with
   their times (open these in ParaView to get the time series).
 
-Every file is written atomically (temporary file in the same folder, then ``os.replace``).
+Every file is written atomically (:func:`workbench.files.atomic_write`); the stem (the
+scene's name by default) is made safe for the file system, so files stay inside ``folder``.
 
 Examples
 --------
@@ -25,22 +26,25 @@ Examples
 >>> files = export(ds, tempfile.mkdtemp())
 >>> [p.name for p in files]  # doctest: +NORMALIZE_WHITESPACE
 ['tp1_0000.vtu', 'tp1_0001.vtu', 'tp1_contact_0000.vtu', 'tp1_contact_0001.vtu', 'tp1.pvd', 'tp1_contact.pvd']
->>> grid = read_vtu(files[0])
->>> grid["points"].shape, grid["cell_types"].tolist()
-((5, 3), [3, 3, 3, 3])
+>>> import meshio
+>>> grid = meshio.read(files[0])
+>>> grid.points.shape, grid.cells[0].type
+((5, 3), 'line')
 """
 from __future__ import annotations
 
-import xml.etree.ElementTree as ET
+from itertools import combinations
 from pathlib import Path
 
 import numpy as np
 
-from .files import atomic_write
+from .files import atomic_write, safe_name
 
-#: VTK cell type of a volume cell by space dimension, and of a contact facet by space dimension.
-CELL_TYPE = {1: 3, 2: 5, 3: 10}
-FACET_TYPE = {1: 1, 2: 3, 3: 5}
+#: meshio cell type of a volume cell by space dimension (linear, quadratic), and of a contact facet.
+CELL_TYPE = {1: ("line", "line3"), 2: ("triangle", "triangle6"), 3: ("tetra", "tetra10")}
+FACET_TYPE = {1: "vertex", 2: "line", 3: "triangle"}
+#: The edges of a simplex in VTK's quadratic node order.
+_EDGES = {1: [(0, 1)], 2: [(0, 1), (1, 2), (2, 0)], 3: [(0, 1), (1, 2), (2, 0), (0, 3), (1, 3), (2, 3)]}
 _COMPONENTS = ("x", "y", "z")
 
 
@@ -49,29 +53,21 @@ def _dim(ds) -> int:
 
 
 def _stem(ds, stem):
-    return stem or str(ds.attrs.get("scene") or "result")
+    return safe_name(stem or ds.attrs.get("scene") or "result")
 
 
 def export_file_names(ds, folder, stem=None) -> list[Path]:
-    """The paths :func:`export` writes for ``ds`` (in that order), without writing anything."""
-    if "snapshot_time" not in ds.coords:
-        return []
+    """The files :func:`export` writes for ``ds`` into ``folder``, in the order it returns them."""
     folder, stem = Path(folder), _stem(ds, stem)
     n = ds.sizes["snapshot"]
     out = [folder / f"{stem}_{i:04d}.vtu" for i in range(n)]
-    if "beta" in ds:
-        out += [folder / f"{stem}_contact_{i:04d}.vtu" for i in range(n)]
-    out.append(folder / f"{stem}.pvd")
-    if "beta" in ds:
-        out.append(folder / f"{stem}_contact.pvd")
-    return out
+    out += [folder / f"{stem}_contact_{i:04d}.vtu" for i in range(n)]
+    return out + [folder / f"{stem}.pvd", folder / f"{stem}_contact.pvd"]
 
 
 def _points3(ds, prefix):
-    """Coordinates ``{prefix}_x/y/z`` padded to (n, 3)."""
     dim = _dim(ds)
-    first = ds[f"{prefix}_x"].values
-    pts = np.zeros((len(first), 3))
+    pts = np.zeros((ds.sizes[prefix], 3))
     for c in range(dim):
         pts[:, c] = ds[f"{prefix}_{_COMPONENTS[c]}"].values
     return pts
@@ -84,26 +80,22 @@ def _pad3(u):
 
 
 def contact_facets(ds):
-    """The contact facets as vertex-index tuples, in the order of ``ds.facet``.
+    """The contact facets as vertex-index tuples (in the order of ``ds.facet`` when the result has beta).
 
-    The contact vertices are the mesh vertices at the ``node`` coordinates; a
-    contact facet is a face of a cell (an end point in 1D, an edge in 2D, a
-    triangle in 3D) whose corners are all contact vertices and that belongs to one
-    cell only. Facets are matched to ``facet_x`` (and ``facet_y`` in 3D) by their
-    midpoints.
+    The contact vertices are the mesh vertices at the ``node`` coordinates; a contact
+    facet is a face of a cell (an end point in 1D, an edge in 2D, a triangle in 3D)
+    whose corners are all contact vertices and that belongs to one cell only. With a
+    bonding field, facets are matched to ``facet_x`` (and ``facet_y``) by their midpoints.
 
     Returns
     -------
     numpy.ndarray of int, shape (n_facet, dim)
-        Vertex indices (into ``vertex``) of each facet's corners.
 
     Raises
     ------
     ValueError
         If the facets cannot be matched one-to-one to the recorded ``beta`` facets.
     """
-    from itertools import combinations
-
     from scipy.spatial import cKDTree
 
     dim = _dim(ds)
@@ -125,9 +117,11 @@ def contact_facets(ds):
                 key = tuple(face.tolist())
                 counts[key] = counts.get(key, 0) + 1
         faces = np.array([f for f, c in counts.items() if c == 1], dtype=np.int64).reshape(-1, dim)
-    ncoord = 2 if dim == 3 else 1  # facets lie on y = 0 (2D) or z = 0 (3D)
-    mids = verts[faces].mean(axis=1)[:, :ncoord]
-    want = np.column_stack([ds[f"facet_{_COMPONENTS[c]}"].values for c in range(ncoord)])
+    if "facet" not in ds.dims:
+        return faces
+    axes = [c for c in range(dim) if f"facet_{_COMPONENTS[c]}" in ds.coords]
+    mids = verts[faces].mean(axis=1)[:, axes]
+    want = np.column_stack([ds[f"facet_{_COMPONENTS[c]}"].values for c in axes])
     if len(faces) != len(want):
         raise ValueError(f"found {len(faces)} contact facets in the mesh but the result has {len(want)} beta facets")
     dist, idx = cKDTree(mids).query(want)
@@ -136,71 +130,42 @@ def contact_facets(ds):
     return faces[idx]
 
 
-def _fmt(arr, integer=False):
-    arr = np.asarray(arr)
-    if integer:
-        return " ".join(str(int(v)) for v in arr.ravel())
-    return " ".join(map(repr, arr.astype(float).ravel().tolist()))  # shortest round-trip text
+def _quadratic(ds, cells):
+    """Points and cells of the quadratic grid: vertices, then the edge midpoints of ``ds.edge_vertices``."""
+    dim = _dim(ds)
+    edges = ds.edge_vertices.values
+    index = {tuple(sorted(e)): i for i, e in enumerate(edges.tolist())}
+    nv = ds.sizes["vertex"]
+    mid = np.array([[nv + index[tuple(sorted((c[a], c[b])))] for a, b in _EDGES[dim]] for c in cells.tolist()],
+                   dtype=np.int64).reshape(len(cells), -1)
+    return np.concatenate([cells, mid], axis=1)
 
 
-def _data_array(parent, name, arr, ncomp=None, dtype="Float64", component_names=None):
-    el = ET.SubElement(parent, "DataArray", type=dtype, format="ascii")
-    if name is not None:
-        el.set("Name", name)
-    if ncomp is not None:
-        el.set("NumberOfComponents", str(ncomp))
-    for i, cname in enumerate(component_names or ()):
-        el.set(f"ComponentName{i}", cname)
-    if dtype.startswith("Float"):
-        el.set("NumberOfTuples", str(np.asarray(arr).shape[0]))
-    el.text = _fmt(arr, integer=not dtype.startswith("Float"))
-    return el
+def _write_vtu(path, points, cell_type, cells, point_data, cell_data, field_data):
+    import meshio
 
+    mesh = meshio.Mesh(points, [(cell_type, cells)], point_data=point_data,
+                       cell_data={k: [v] for k, v in cell_data.items()})
 
-def _vtu(points, cells, cell_type, point_data, cell_data, field_data):
-    """An UnstructuredGrid VTKFile element tree (ASCII)."""
-    root = ET.Element("VTKFile", type="UnstructuredGrid", version="1.0", byte_order="LittleEndian",
-                      header_type="UInt64")
-    grid = ET.SubElement(root, "UnstructuredGrid")
-    fd = ET.SubElement(grid, "FieldData")
-    for name, value in field_data.items():
-        _data_array(fd, name, np.atleast_1d(np.asarray(value, dtype=float)))
-    piece = ET.SubElement(grid, "Piece", NumberOfPoints=str(len(points)), NumberOfCells=str(len(cells)))
-    pd = ET.SubElement(piece, "PointData", Vectors="displacement")
-    for name, arr in point_data.items():
-        _data_array(pd, name, arr, ncomp=arr.shape[1] if arr.ndim > 1 else None)
-    cd = ET.SubElement(piece, "CellData")
-    for name, (arr, comp_names) in cell_data.items():
-        _data_array(cd, name, arr, ncomp=arr.shape[1] if arr.ndim > 1 else None, component_names=comp_names)
-    pts = ET.SubElement(piece, "Points")
-    _data_array(pts, "Points", points, ncomp=3)
-    cl = ET.SubElement(piece, "Cells")
-    cells = np.asarray(cells, dtype=np.int64)
-    _data_array(cl, "connectivity", cells.ravel(), dtype="Int64")
-    _data_array(cl, "offsets", np.arange(1, len(cells) + 1) * cells.shape[1], dtype="Int64")
-    _data_array(cl, "types", np.full(len(cells), cell_type), dtype="UInt8")
-    return root
+    def write(tmp):
+        mesh.write(tmp, file_format="vtu")
+        # meshio's writer drops field data; ParaView reads a scalar TimeValue from the grid's FieldData
+        arrays = "".join(f'<DataArray type="Float64" Name="{k}" NumberOfTuples="1" format="ascii">{float(v)!r}'
+                         "</DataArray>" for k, v in field_data.items())
+        text = tmp.read_text().replace("<UnstructuredGrid>", f"<UnstructuredGrid>\n<FieldData>{arrays}</FieldData>", 1)
+        tmp.write_text(text)
 
-
-def _write_atomic(path: Path, text: str) -> Path:
-    return atomic_write(path, lambda tmp: tmp.write_text(text, encoding="utf-8"))
-
-
-def _xml_text(root) -> str:
-    ET.indent(root, space=" ")
-    return '<?xml version="1.0"?>\n' + ET.tostring(root, encoding="unicode") + "\n"
+    return atomic_write(path, write)
 
 
 def _pvd(entries) -> str:
-    root = ET.Element("VTKFile", type="Collection", version="0.1")
-    coll = ET.SubElement(root, "Collection")
-    for t, name in entries:
-        ET.SubElement(coll, "DataSet", timestep=repr(float(t)), group="", part="0", file=name)
-    return _xml_text(root)
+    rows = "\n".join(f'    <DataSet timestep="{float(t)!r}" group="" part="0" file="{name}"/>' for t, name in entries)
+    return ('<?xml version="1.0"?>\n<VTKFile type="Collection" version="0.1">\n  <Collection>\n'
+            f"{rows}\n  </Collection>\n</VTKFile>\n")
 
 
 def export(ds, folder, stem=None) -> list[Path]:
-    """Write the snapshots of ``ds`` as ``.vtu`` files with ``.pvd`` collections (see the module docstring).
+    """Write the snapshots of ``ds`` as ParaView files into ``folder`` (see the module docs).
 
     Parameters
     ----------
@@ -209,7 +174,7 @@ def export(ds, folder, stem=None) -> list[Path]:
     folder : str or Path
         Created if missing.
     stem : str, optional
-        File name stem (default: the scene name).
+        File name stem (default: the scene name, made safe for the file system).
 
     Returns
     -------
@@ -227,80 +192,52 @@ def export(ds, folder, stem=None) -> list[Path]:
     dim = _dim(ds)
     points = _points3(ds, "vertex")
     cells = ds.cell_vertices.values[:, : dim + 1]
-    stress_names = [str(s) for s in ds.stress_component.values] if "stress" in ds else []
-    snap_t = ds.snapshot_time.values
-    has_beta = "beta" in ds
-    if has_beta:
-        facets = contact_facets(ds)
-        used = np.unique(facets)
-        renumber = np.full(len(points), -1, dtype=np.int64)
-        renumber[used] = np.arange(len(used))
-        times = ds.time.values
+    quadratic = "u_edges" in ds
+    if quadratic:
+        edges = ds.edge_vertices.values
+        points = np.concatenate([points, points[edges].mean(axis=1)])
+        cells = _quadratic(ds, cells)
+    cell_type = CELL_TYPE[dim][int(quadratic)]
+    stress_names = [str(s) for s in ds.stress_component.values]
+    facets = contact_facets(ds)
+    used = np.unique(facets)
+    renumber = np.full(ds.sizes["vertex"], -1, dtype=np.int64)
+    renumber[used] = np.arange(len(used))
+    node_of_vertex = _node_order(ds, used)
+    times = ds.time.values
     written, main, contact = [], [], []
-    for i, t in enumerate(snap_t):
-        u = _pad3(ds.u_nodes.isel(snapshot=i).values)
-        cell_data = {"von_mises": (ds.von_mises.isel(snapshot=i).values, None)}
-        if stress_names:
-            s = ds.stress.isel(snapshot=i).values
-            cell_data["stress"] = (s if s.shape[1] > 1 else s[:, 0], stress_names if s.shape[1] > 1 else None)
+    for i, t in enumerate(ds.snapshot_time.values):
+        u = ds.u_nodes.isel(snapshot=i).values
+        if quadratic:
+            u = np.concatenate([u, ds.u_edges.isel(snapshot=i).values])
+        s = ds.stress.isel(snapshot=i).values
+        cell_data = {"von_mises": ds.von_mises.isel(snapshot=i).values, "stress": s if s.shape[1] > 1 else s[:, 0]}
         name = f"{stem}_{i:04d}.vtu"
-        root = _vtu(points, cells, CELL_TYPE[dim], {"displacement": u}, cell_data, {"TimeValue": t})
-        written.append(_write_atomic(folder / name, _xml_text(root)))
+        written.append(_write_vtu(folder / name, points, cell_type, cells, {"displacement": _pad3(u)}, cell_data,
+                                  {"TimeValue": t}))
         main.append((t, name))
-        if has_beta:
-            j = int(np.argmin(np.abs(times - t)))  # beta lives on the record axis: nearest recorded time
-            beta = ds.beta.isel(time=j).values
-            cname = f"{stem}_contact_{i:04d}.vtu"
-            root = _vtu(points[used], renumber[facets], FACET_TYPE[dim], {"displacement": u[used]},
-                        {"beta": (beta, None)}, {"TimeValue": t, "BetaTime": times[j]})
-            contact.append((t, cname, _xml_text(root)))
-    for t, cname, text in contact:
-        written.append(_write_atomic(folder / cname, text))
-    written.append(_write_atomic(folder / f"{stem}.pvd", _pvd(main)))
-    if has_beta:
-        written.append(_write_atomic(folder / f"{stem}_contact.pvd", _pvd([(t, n) for t, n, _ in contact])))
+        j = int(np.argmin(np.abs(times - t)))  # contact data live on the record axis: nearest recorded time
+        point_data = {"displacement": _pad3(ds.u_nodes.isel(snapshot=i).values[used])}
+        for var in ("contact_pressure", "contact_state"):
+            if var in ds:
+                point_data[var] = ds[var].isel(time=j).values[node_of_vertex].astype(float)
+        cdata = {"beta": ds.beta.isel(time=j).values} if "beta" in ds else {}
+        cname = f"{stem}_contact_{i:04d}.vtu"
+        path = _write_vtu(folder / cname, points[used], FACET_TYPE[dim], renumber[facets], point_data, cdata,
+                          {"TimeValue": t, "RecordTime": times[j]})
+        contact.append((path, (t, cname)))
+    written += [p for p, _ in contact]
+    written.append(atomic_write(folder / f"{stem}.pvd", lambda tmp: tmp.write_text(_pvd(main))))
+    written.append(atomic_write(folder / f"{stem}_contact.pvd", lambda tmp: tmp.write_text(_pvd([e for _, e in contact]))))
     return written
 
 
-def read_vtu(path) -> dict:
-    """Read back an ASCII ``.vtu`` written by :func:`export` (for checks; not a general VTK reader).
+def _node_order(ds, used):
+    """For each used contact vertex (in ``used`` order), its index on the ``node`` axis."""
+    from scipy.spatial import cKDTree
 
-    Returns
-    -------
-    dict
-        ``points`` (n, 3), ``connectivity``, ``offsets``, ``cell_types`` (int arrays),
-        ``point_data`` / ``cell_data`` / ``field_data``: name -> array (n, ncomp) or (n,),
-        and ``n_points``, ``n_cells`` as declared in the header.
-    """
-    root = ET.parse(path).getroot()
-    if root.get("type") != "UnstructuredGrid":
-        raise ValueError(f"{path}: not an UnstructuredGrid VTK file")
-    piece = root.find("UnstructuredGrid/Piece")
-
-    def arr(el):
-        dtype = float if el.get("type", "").startswith("Float") else np.int64
-        a = np.array((el.text or "").split(), dtype=dtype)
-        ncomp = int(el.get("NumberOfComponents", "1"))
-        return a.reshape(-1, ncomp) if ncomp > 1 else a
-
-    def group(tag, where=piece):
-        node = where.find(tag)
-        return {} if node is None else {el.get("Name"): arr(el) for el in node.findall("DataArray")}
-
-    cells = group("Cells")
-    return {
-        "n_points": int(piece.get("NumberOfPoints")), "n_cells": int(piece.get("NumberOfCells")),
-        "points": arr(piece.find("Points/DataArray")),
-        "connectivity": cells["connectivity"], "offsets": cells["offsets"], "cell_types": cells["types"],
-        "point_data": group("PointData"), "cell_data": group("CellData"),
-        "field_data": group("FieldData", root.find("UnstructuredGrid")),
-    }
+    _, idx = cKDTree(_points3(ds, "node")).query(_points3(ds, "vertex")[used])
+    return idx
 
 
-def read_pvd(path) -> list[tuple[float, str]]:
-    """The (time, file name) entries of a ``.pvd`` collection."""
-    root = ET.parse(path).getroot()
-    return [(float(d.get("timestep")), d.get("file")) for d in root.iter("DataSet")]
-
-
-__all__ = ["export", "export_file_names", "contact_facets", "read_vtu", "read_pvd", "CELL_TYPE", "FACET_TYPE"]
+__all__ = ["export", "export_file_names", "contact_facets", "CELL_TYPE", "FACET_TYPE"]

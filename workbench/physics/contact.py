@@ -1,94 +1,138 @@
-"""Contact tractions on Gamma_3: normal compliance, adhesive pull, tangential glue (Model A).
+"""Contact tractions on Gamma_3 (Model A): the term protocol and their sum.
 
-Sign convention (SPEC): u_nu = u . nu with nu the outward normal, positive =
-penetration into the foundation. The boundary functional of the weak form is
+Sign convention: u_nu = u . nu with nu the body's outward normal towards the
+foundation, positive = penetration; u_tau is the rest of u (the components along
+the foundation plane; :mod:`workbench.geometry` says which). The boundary
+functional of the weak form is
 
-    j(beta, u, w) = int_Gamma3  p_nu(u_nu) w_nu - gamma_nu beta^2 (-R(u_nu))_+ w_nu
-                                + p_tau(beta) R*(u_tau) . w_tau  da
+    j(beta, u, w) = int_Gamma3 p_nu(u_nu, beta) w_nu + p_tau(u_tau, beta) . w_tau  da,
 
-so a positive integrand coefficient of w_nu pushes the body out of the foundation.
-Every function returns an NGSolve coefficient expression; ``IfPos`` makes the
-truncations exact and their linearisation semismooth.
+the sum over the scene's contact terms; a positive p_nu pushes the body out of
+the foundation. Each term is a :class:`ContactTerm` (the laws are in
+:mod:`workbench.physics.laws`, one file each) and carries everything about
+itself: its tractions (written once, evaluated as NGSolve coefficient functions
+or as NumPy arrays, :mod:`.ops`), their slopes (the linearisation the implicit
+schemes use, checked against finite differences in the tests), its largest
+slope (the explicit scheme's stability limit), whether it acts on the
+tangential components, whether it needs the bonding field, and how it is built
+from a scene's values.
 
 Examples
 --------
->>> import ngsolve as ngs
->>> mesh = ngs.Mesh(ngs.unit_square.GenerateMesh(maxh=1))
->>> float(truncate(ngs.CF(-0.5), 0.3)(mesh(0.1, 0.1)))
--0.3
+>>> import numpy as np
+>>> from workbench.physics.laws import NormalCompliance
+>>> c = Contact([NormalCompliance(c_nu=2.0, m_nu=1.0, gap=0.0)])
+>>> c.normal(NP, np.array([-0.1, 0.2]), None).tolist()
+[0.0, 0.4]
 """
 from __future__ import annotations
 
-import ngsolve as ngs
+import numpy as np
+
+from .ops import NGS, NP
 
 
-def positive_part(s):
-    """(s)_+ = max(s, 0)."""
-    return ngs.IfPos(s, s, 0)
+class ContactTerm:
+    """One contact law. Subclasses implement the parts they need (defaults: no traction).
 
-
-def truncate(s, L: float):
-    """R(s) = clip(s, -L, L)."""
-    return ngs.IfPos(s - L, L, ngs.IfPos(-L - s, -L, s))
-
-
-def truncate_vector(v, L: float):
-    """R*(v) = v if |v| <= L else L v / |v|."""
-    norm = ngs.sqrt(ngs.InnerProduct(v, v) + 1e-300)
-    return ngs.IfPos(norm - L, L / norm, 1.0) * v
-
-
-def normal_compliance(u_nu, c_nu: float, m_nu: float = 1.0, gap: float = 0.0):
-    """p_nu(u_nu - g) = c_nu ((u_nu - g)_+)^m_nu: the foundation's push against penetration."""
-    s = u_nu - gap
-    # the power sits inside the branch: d/ds (s_+)**m linearises to NaN wherever s <= 0
-    return c_nu * (positive_part(s) if m_nu == 1 else ngs.IfPos(s, s**m_nu, 0))
-
-
-def adhesive_pull(u_nu, beta, gamma_nu: float, L: float):
-    """gamma_nu beta^2 (-R(u_nu))_+: the glue's pull back towards the foundation under tension."""
-    return gamma_nu * beta * beta * positive_part(-truncate(u_nu, L))
-
-
-def glue_traction(u_tau, beta, c_tau: float, L: float):
-    """p_tau(beta) R*(u_tau) with p_tau(beta) = c_tau beta: tangential glue stiffness."""
-    return c_tau * beta * truncate_vector(u_tau, L)
-
-
-def normal_and_tangential(u, normal, dim: int):
-    """(u_nu, u_tau); in 1D the rod end has u_nu = u and no tangential part."""
-    if dim == 1:
-        return u * normal, None
-    u_nu = ngs.InnerProduct(u, normal)
-    return u_nu, u - u_nu * normal
-
-
-def outward_normal(dim: int):
-    """The outward unit normal on the contact boundary (1D: +1 at the rod end x = length).
-
-    NGSolve's ``specialcf.normal(1)`` is +1 at both ends of an interval, so the
-    1D normal is fixed here for the right end, the only 1D contact side.
+    Class attributes: ``name`` (as listed in a run's ``terms``), ``rank`` (order of
+    summation), ``tangential`` (acts on u_tau), ``uses_beta`` (needs the bonding field),
+    ``parameters`` (the :class:`workbench.parameters.Param` rows it adds to the table).
     """
-    return 1.0 if dim == 1 else ngs.specialcf.normal(dim)
+
+    name = ""
+    rank = 100
+    tangential = False
+    uses_beta = False
+    parameters: tuple = ()
+
+    @classmethod
+    def from_values(cls, values: dict):
+        """This term as the scene's values declare it, or None when the scene does not model it."""
+        raise NotImplementedError
+
+    def normal(self, ops, u_nu, beta):
+        """p_nu, the coefficient of w_nu (None: no normal traction)."""
+        return None
+
+    def normal_slope(self, ops, u_nu, beta):
+        """d p_nu / d u_nu (NumPy)."""
+        return 0.0
+
+    def tangential_traction(self, ops, u_tau, beta):
+        """p_tau, the vector multiplying w_tau (None: no tangential traction)."""
+        return None
+
+    def tangential_slope(self, ops, u_tau, beta):
+        """d p_tau / d u_tau, shape (..., d-1, d-1) (NumPy)."""
+        return 0.0
+
+    def max_slope(self, beta0: float) -> tuple[float, float]:
+        """The largest (normal, tangential) slopes over all states with beta <= beta0."""
+        return 0.0, 0.0
 
 
-def boundary_integrand(terms, scene, u, beta, w):
-    """The integrand of j(beta, u, w) with only the declared ``terms``; None if there are none.
+class Contact:
+    """The sum of a scene's contact terms (in ``rank`` order)."""
 
-    ``u`` and ``beta`` are coefficient functions (the lagged state in the
-    explicit scheme, trial functions in the implicit one); ``w`` is the test function.
-    """
-    v, dim = scene.values, scene.dim
-    n = outward_normal(dim)
-    u_nu, u_tau = normal_and_tangential(u, n, dim)
-    w_nu, w_tau = normal_and_tangential(w, n, dim)
-    normal_push = 0
-    if "compliance" in terms:
-        normal_push = normal_compliance(u_nu, v["c_nu"], v["m_nu"], v["gap"])
-    if "adhesion" in terms:
-        normal_push = normal_push - adhesive_pull(u_nu, beta, v["gamma_nu"], v["L"])
-    integrand = None if isinstance(normal_push, int) else normal_push * w_nu
-    if "glue" in terms:
-        glue = ngs.InnerProduct(glue_traction(u_tau, beta, v["c_tau"], v["L"]), w_tau)
-        integrand = glue if integrand is None else integrand + glue
-    return integrand
+    def __init__(self, terms):
+        self.terms = tuple(sorted(terms, key=lambda t: t.rank))
+
+    @property
+    def names(self) -> tuple:
+        return tuple(t.name for t in self.terms)
+
+    @property
+    def tangential(self) -> bool:
+        """Whether any term acts on the tangential components (then the implicit Jacobian needs them all)."""
+        return any(t.tangential for t in self.terms)
+
+    @property
+    def uses_beta(self) -> bool:
+        return any(t.uses_beta for t in self.terms)
+
+    def __bool__(self):
+        return bool(self.terms)
+
+    def normal(self, ops, u_nu, beta):
+        total = None
+        for t in self.terms:
+            p = t.normal(ops, u_nu, beta)
+            if p is not None:
+                total = p if total is None else total + p
+        return total
+
+    def normal_slope(self, u_nu, beta):
+        return sum((t.normal_slope(NP, u_nu, beta) for t in self.terms), np.zeros_like(u_nu))
+
+    def tangential_traction(self, ops, u_tau, beta):
+        total = None
+        for t in self.terms:
+            p = t.tangential_traction(ops, u_tau, beta)
+            if p is not None:
+                total = p if total is None else total + p
+        return total
+
+    def tangential_slope(self, u_tau, beta):
+        eye = np.zeros(u_tau.shape + (u_tau.shape[-1],))
+        return sum((t.tangential_slope(NP, u_tau, beta) for t in self.terms), eye)
+
+    def max_slope(self, beta0: float) -> tuple[float, float]:
+        """Largest (normal, tangential) spring over the terms (each term acts alone where it acts)."""
+        slopes = [t.max_slope(beta0) for t in self.terms] or [(0.0, 0.0)]
+        return max(s[0] for s in slopes), sum(s[1] for s in slopes)
+
+    def integrand(self, u_nu, u_tau, beta, w_nu, w_tau):
+        """The NGSolve integrand of j(beta, u, w) (None when no term gives a traction)."""
+        import ngsolve as ngs
+
+        out = None
+        p = self.normal(NGS, u_nu, beta)
+        if p is not None:
+            out = p * w_nu
+        if u_tau is not None:
+            q = self.tangential_traction(NGS, u_tau, beta)
+            if q is not None:
+                part = ngs.InnerProduct(q, w_tau)
+                out = part if out is None else out + part
+        return out

@@ -1,18 +1,34 @@
-"""Kelvin–Voigt material sigma = A eps(u') + G eps(u): linear tensors A (viscous) and G (elastic).
+"""Linear material tensors (strain -> stress) for both models, and the strain, energy and von Mises forms.
 
-A tensor is a function from a strain to a stress. Isotropic tensors are
-``lam tr(eps) I + two_mu eps``; plane stress, 3D and the rod's scalar moduli are
-special choices of (lam, two_mu). A user may pass any linear function of the strain.
+Model A is a Kelvin–Voigt body sigma = A eps(u') + G eps(u) (A viscous, G elastic);
+Model B's instantaneous tensor A and its relaxation tensors are the same kind of
+object. A tensor is one of
+
+* :class:`Isotropic` ``lam tr(eps) I + two_mu eps`` (any dimension), built from
+  (E, nu) by :func:`from_young`: plane stress (the paper's 2D tests), plane strain,
+  or 3D;
+* :class:`Scalar` ``modulus * eps`` (the rod);
+* :class:`Voigt` any symmetric positive definite matrix in Voigt notation
+  (strain (e11, e22, 2 e12) in 2D, (e11, e22, e33, 2 e23, 2 e13, 2 e12) in 3D),
+  for anisotropic materials.
 
 Examples
 --------
 >>> lam, two_mu = plane_stress_moduli(E=1000.0, nu=0.3)
 >>> round(lam, 3), round(two_mu, 3)
 (329.67, 769.231)
+>>> G = from_young(1000.0, 0.3, dim=2)
+>>> round(float(G.voigt()[0, 0]), 3)  # E / (1 - nu^2)
+1098.901
 """
 from __future__ import annotations
 
+from dataclasses import dataclass
+
 import ngsolve as ngs
+import numpy as np
+
+from ..errors import ParameterError
 
 
 def plane_stress_moduli(E: float, nu: float) -> tuple[float, float]:
@@ -21,23 +37,104 @@ def plane_stress_moduli(E: float, nu: float) -> tuple[float, float]:
 
 
 def lame_moduli(E: float, nu: float) -> tuple[float, float]:
-    """(lam, two_mu) of 3D isotropic elasticity: E nu / ((1 + nu)(1 - 2 nu)), E / (1 + nu)."""
+    """(lam, two_mu) of 3D isotropic elasticity (also plane strain): E nu / ((1 + nu)(1 - 2 nu)), E / (1 + nu)."""
     return E * nu / ((1.0 + nu) * (1.0 - 2.0 * nu)), E / (1.0 + nu)
 
 
-def isotropic(lam: float, two_mu: float):
-    """The isotropic tensor eps -> lam tr(eps) I + two_mu eps (any dimension)."""
+_VOIGT = {2: [(0, 0), (1, 1), (0, 1)], 3: [(0, 0), (1, 1), (2, 2), (1, 2), (0, 2), (0, 1)]}
+#: Tensor components in storage order (the results' stress_component): Voigt order, tensor (not engineering) shear.
+COMPONENTS = {1: [(0, 0)], **_VOIGT}
 
-    def tensor(eps):
+
+@dataclass(frozen=True)
+class Isotropic:
+    """eps -> lam tr(eps) I + two_mu eps."""
+
+    lam: float
+    two_mu: float
+
+    def __call__(self, eps):
         dim = eps.dims[0]
-        return lam * ngs.Trace(eps) * ngs.Id(dim) + two_mu * eps
+        return self.lam * ngs.Trace(eps) * ngs.Id(dim) + self.two_mu * eps
 
-    return tensor
+    def scaled(self, factor: float) -> "Isotropic":
+        return Isotropic(factor * self.lam, factor * self.two_mu)
+
+    def apply(self, strain: np.ndarray) -> np.ndarray:
+        """The stress of strains given as components (..., COMPONENTS order), the same layout back."""
+        dim = {3: 2, 6: 3}[strain.shape[-1]]
+        out = self.two_mu * strain
+        out[..., :dim] += self.lam * strain[..., :dim].sum(axis=-1, keepdims=True)
+        return out
+
+    def voigt(self, dim: int = 2) -> np.ndarray:
+        """The matrix of this tensor in Voigt notation (engineering shear strains)."""
+        n = len(_VOIGT[dim])
+        C = np.zeros((n, n))
+        C[:dim, :dim] = self.lam
+        C[np.arange(dim), np.arange(dim)] += self.two_mu
+        C[np.arange(dim, n), np.arange(dim, n)] = 0.5 * self.two_mu
+        return C
 
 
-def scalar(modulus: float):
-    """The 1D tensor eps -> modulus * eps (the rod's a or b)."""
-    return lambda eps: modulus * eps
+@dataclass(frozen=True)
+class Scalar:
+    """eps -> modulus * eps (the rod's a, b, or a relaxation modulus)."""
+
+    modulus: float
+
+    def __call__(self, eps):
+        return self.modulus * eps
+
+    def scaled(self, factor: float) -> "Scalar":
+        return Scalar(factor * self.modulus)
+
+    def apply(self, strain: np.ndarray) -> np.ndarray:
+        return self.modulus * strain
+
+
+class Voigt:
+    """A user-supplied linear tensor: stress_v = C strain_v in Voigt notation (see the module docs)."""
+
+    def __init__(self, matrix, dim: int, name: str = "tensor"):
+        C = np.asarray(matrix, dtype=float)
+        n = len(_VOIGT.get(dim, ()))
+        if dim not in _VOIGT or C.shape != (n, n):
+            raise ParameterError(f"{name}: a {dim}D body needs a {n} x {n} matrix in Voigt notation, got shape "
+                                 f"{C.shape}")
+        if not np.all(np.isfinite(C)) or not np.allclose(C, C.T, rtol=1e-12, atol=0.0):
+            raise ParameterError(f"{name}: the matrix must be finite and symmetric")
+        if np.linalg.eigvalsh(C).min() <= 0:
+            raise ParameterError(f"{name}: the matrix must be positive definite (a strongly monotone tensor)")
+        self.C, self.dim, self.name = C, dim, name
+
+    def __call__(self, eps):
+        dim = self.dim
+        strain = ngs.CF(tuple((1.0 if i == j else 2.0) * eps[i, j] for i, j in _VOIGT[dim]))
+        stress = ngs.CF(tuple(self.C.ravel()), dims=self.C.shape) * strain
+        comp = {pair: k for k, pair in enumerate(_VOIGT[dim])}
+        return ngs.CF(tuple(stress[comp[min(i, j), max(i, j)]] for i in range(dim) for j in range(dim)),
+                      dims=(dim, dim))
+
+    def scaled(self, factor: float) -> "Voigt":
+        return Voigt(factor * self.C, self.dim, self.name)
+
+    def apply(self, strain: np.ndarray) -> np.ndarray:
+        engineering = strain.copy()
+        engineering[..., self.dim:] *= 2.0
+        return engineering @ self.C.T
+
+    def voigt(self, dim: int = 2) -> np.ndarray:
+        return self.C.copy()
+
+
+def from_young(E: float, nu: float, dim: int, plane: str = "stress"):
+    """The isotropic tensor of Young's modulus E and Poisson's ratio nu: the rod's E, plane stress or strain, 3D."""
+    if dim == 1:
+        return Scalar(E)
+    if dim == 2 and plane == "stress":
+        return Isotropic(*plane_stress_moduli(E, nu))
+    return Isotropic(*lame_moduli(E, nu))
 
 
 def strain(u, dim: int):
@@ -47,21 +144,25 @@ def strain(u, dim: int):
     return ngs.Sym(ngs.Grad(u))
 
 
-def tensors(scene):
-    """The scene's (A, G): viscous and elastic tensors as strain -> stress functions."""
-    v = scene.values
-    if scene.dim == 1:
-        return scalar(v["b"]), scalar(v["a"])
-    moduli = plane_stress_moduli if scene.dim == 2 else lame_moduli
-    return isotropic(v["a1"], v["a2"]), isotropic(*moduli(v["E"], v["nu"]))
-
-
 def energy_product(tensor, u, w, dim: int):
     """The integrand tensor(eps(u)) : eps(w) of a stiffness or viscosity form."""
     eu, ew = strain(u, dim), strain(w, dim)
     if dim == 1:
         return tensor(eu) * ew
     return ngs.InnerProduct(tensor(eu), ew)
+
+
+def von_mises_cells(stress: np.ndarray, dim: int) -> np.ndarray:
+    """The same norm of stresses given as components (cell, COMPONENTS order), with NumPy."""
+    s = stress
+    if dim == 1:
+        return np.abs(s[:, 0])
+    if dim == 2:
+        s11, s22, s12 = s[:, 0], s[:, 1], s[:, 2]
+        return np.sqrt(s11 * s11 + s22 * s22 - s11 * s22 + 3 * s12 * s12)
+    mean = s[:, :3].sum(axis=1) / 3
+    dev = s[:, :3] - mean[:, None]
+    return np.sqrt(1.5 * ((dev ** 2).sum(axis=1) + 2 * (s[:, 3:] ** 2).sum(axis=1)))
 
 
 def von_mises(sigma, dim: int):

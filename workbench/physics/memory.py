@@ -1,9 +1,9 @@
-"""Long memory (Model B): sigma(t) = A eps(u(t)) + int_0^t B(t - s) eps(u(s)) ds.
+"""Long memory (Model B): sigma(t) = A eps(u(t)) + int_0^t B(t - s) eps(u(s)) ds, with the relaxation kernel B.
 
-The relaxation kernel is either a Prony series B(t) = sum_i C_i exp(-t / tau_i)
-(C_i isotropic, given by (E_i, nu_i); the rod's by a modulus) or a general
-b(t) C with b an expression in t. The fully discrete memory term is the left
-rectangle rule on the time grid (SPEC):
+A kernel is a :class:`Prony` series B(t) = sum_i C_i exp(-t / tau_i) (C_i linear
+tensors; the moduli may be negative, i.e. relaxation) or a :class:`GeneralKernel`
+B(t) = b(t) C with b an expression in t. The fully discrete memory term is the left
+rectangle rule on the time grid (docs/schemes.md):
 
     M_n = sum_{j < n} (t_{j+1} - t_j) B(t_n - t_j) eps(u_j).
 
@@ -14,61 +14,38 @@ Both give the same M_n where both apply.
 
 Examples
 --------
->>> import workbench
->>> [(round(t[0].lam, 3), round(t[0].two_mu, 3), t[1]) for t in prony_tensors(workbench.scene("memory_slab"))]
-[(-329.67, -769.231, 0.5)]
+>>> from workbench.physics.kelvin_voigt import Scalar
+>>> k = Prony([(Scalar(0.5), 0.2)])
+>>> k.kind, k.decays(0.1)
+('prony', [0.6065306597126334])
 """
 from __future__ import annotations
-
-from dataclasses import dataclass
 
 import numpy as np
 
 
-@dataclass(frozen=True)
-class Isotropic:
-    """lam tr(eps) I + two_mu eps (in 1D: two_mu eps with lam = 0)."""
+class Prony:
+    """B(t) = sum_i C_i exp(-t / tau_i), given as [(C_i, tau_i)]."""
 
-    lam: float
-    two_mu: float
+    kind = "prony"
 
-    def __call__(self, eps):
-        from .kelvin_voigt import isotropic
+    def __init__(self, terms):
+        self.terms = list(terms)
 
-        if not hasattr(eps, "dims") or len(eps.dims) < 2:
-            return self.two_mu * eps
-        return isotropic(self.lam, self.two_mu)(eps)
+    def decays(self, k: float) -> list:
+        """exp(-k / tau_i): the one-step factors of the histories."""
+        return [float(np.exp(-k / tau)) for _, tau in self.terms]
 
 
-def tensor_of(E: float, nu: float, dim: int) -> Isotropic:
-    """The isotropic tensor with Young's modulus E and Poisson's ratio nu (plane stress in 2D; 1D: E)."""
-    from .kelvin_voigt import lame_moduli, plane_stress_moduli
+class GeneralKernel:
+    """B(t) = b(t) C with b an expression in t (O(n) quadrature per step)."""
 
-    if dim == 1:
-        return Isotropic(0.0, E)
-    lam, two_mu = (plane_stress_moduli if dim == 2 else lame_moduli)(E, nu)
-    return Isotropic(lam, two_mu)
+    kind = "kernel"
 
+    def __init__(self, shape, tensor):
+        self.shape, self.tensor = shape, tensor
 
-def prony_tensors(scene) -> list:
-    """[(C_i, tau_i)] of the scene's Prony series."""
-    out = []
-    for term in scene["prony"]:
-        E, tau = term[0], term[-1]
-        nu = term[1] if len(term) == 3 else 0.0
-        out.append((tensor_of(E, nu, scene.dim), tau))
-    return out
-
-
-def kernel_tensor(scene):
-    """(C, b) of a general kernel B(t) = b(t) C, or None when there is none."""
-    v = scene.values
-    if v["kernel"].is_zero() or v["kernel_E"] == 0:
-        return None
-    return tensor_of(v["kernel_E"], v.get("kernel_nu", 0.0), scene.dim), v["kernel"]
-
-
-def quadrature_weights(times: np.ndarray, n: int, kernel) -> np.ndarray:
-    """w_j = (t_{j+1} - t_j) b(t_n - t_j), j < n: the left-rectangle weights of M_n."""
-    t = times[: n + 1]
-    return np.diff(t) * np.asarray(kernel(t=t[n] - t[:n]), dtype=float)
+    def weights(self, times: np.ndarray) -> np.ndarray:
+        """w_j = (t_{j+1} - t_j) b(t_n - t_j), j < n, for the grid t_0 .. t_n: the left-rectangle weights of M_n."""
+        t = np.asarray(times, dtype=float)
+        return np.diff(t) * np.asarray(self.shape(t=t[-1] - t[:-1]), dtype=float)

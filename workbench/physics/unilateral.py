@@ -24,7 +24,31 @@ from __future__ import annotations
 import numpy as np
 
 SEPARATED, STUCK, COMPLIANT, RIGID = 0, 1, 2, 3
-STATE_NAMES = ("separated", "stuck", "compliant", "rigid")
+
+
+class Layer:
+    """The compliant layer psi(r) = F r_+ + (c/2) r_+^2 over the rigid foundation at u_nu = g, with its nodal law.
+
+    Examples
+    --------
+    >>> Layer(F=1.0, c=1.0, g=1.0).prox(np.array([0.5]), rho=0.1).round(6).tolist()
+    [0.363636]
+    """
+
+    def __init__(self, F: float, c: float, g: float):
+        self.F, self.c, self.g = float(F), float(c), float(g)
+
+    def prox(self, z, rho):
+        return prox(z, rho, self.F, self.c, self.g)
+
+    def state_of(self, z, rho):
+        return state_of(z, rho, self.F, self.c, self.g)
+
+    def solve_states(self, S_inv, s_free, w, states):
+        return solve_states(S_inv, s_free, w, self.F, self.c, self.g, states)
+
+    def complementarity(self, s, lam, w, rho):
+        return complementarity(s, lam, w, rho, self.F, self.c, self.g)
 
 
 def prox(z, rho, F, c, g):

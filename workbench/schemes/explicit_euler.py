@@ -1,4 +1,4 @@
-"""The paper's fully discrete scheme PV^hk (eqs. 6.9–6.12, 7.1–7.4).
+"""The paper's fully discrete scheme PV^hk (Chau et al. 2003, eqs. 6.9–6.12, 7.1–7.4): ``scheme = "explicit"``.
 
 Per step n (k_n = t_n - t_{n-1}):
 
@@ -7,65 +7,94 @@ Per step n (k_n = t_n - t_{n-1}):
     beta_n = clip(beta_{n-1} - k_n P_B (gamma_nu beta_{n-1} R(u_{n-1,nu})^2 - eps_a)_+, 0, 1)
     sigma_n = P_Q [A eps(v_n) + G eps(u_{n-1})]
 
-The viscous matrix is factored once (:mod:`workbench.solvers`); the elastic term is a
-matvec with the matrix assembled once; only the contact-boundary forms are
-assembled per step. Contact is lagged, so the scheme is only conditionally
-stable (k small against the viscous stiffness of the contact springs).
+The viscous matrix is factored once (:mod:`workbench.solvers`); the elastic term is
+a matvec with the matrix assembled once; the contact terms and the bonding rate are
+evaluated at the contact quadrature points with trace operators assembled once
+(:mod:`workbench.boundary`): one back-substitution per step and vector work.
+Contact is lagged, so the scheme is only conditionally stable: k < k_crit, which
+:meth:`ExplicitEuler.preflight` predicts before the run (:mod:`workbench.stability`).
 """
 from __future__ import annotations
 
+
 import numpy as np
 
-from .. import solvers
-from ..physics import kelvin_voigt
+from .. import solvers, stability
+from ..physics.ops import NP
+from .base import KelvinVoigtScheme
 
 
-class ExplicitEuler:
+class ExplicitEuler(KelvinVoigtScheme):
+    """The paper's scheme: viscous term implicit, elastic and contact terms lagged (module docs)."""
+
     name = "explicit"
-    watch_chatter = True  # its unstable contact mode can bounce instead of alternating
+    chatter_watch = True  # its unstable contact mode can bounce instead of alternating
+    lag = 1.0  # sigma_n uses u_{n-1} = u_n - k v_n
 
     def __init__(self, disc):
-        self.d = d = disc
+        super().__init__(disc)
+        d = self.d
         self.solver = solvers.factor(d.viscous.mat, d.fes.FreeDofs(), d.u.vec, d.scene["solver"])
         self.rhs = d.u.vec.CreateVector()
-        self.rhs_np, self.v_np = self.rhs.FV().NumPy(), d.v.vec.FV().NumPy()
-        self.moves_clamp = d.dim == 1 and d.scene["delta"].depends_on("t")
-        if self.moves_clamp:
+        self.rhs_np, self.v_np, self.u_np = self.rhs.FV().NumPy(), d.v.vec.FV().NumPy(), d.u.vec.FV().NumPy()
+        self.work = d.u.vec.CreateVector()
+        self.work_np = self.work.FV().NumPy()
+        self.contact = d.model.contact
+        self.bonding = d.model.bonding
+        self.beta_np = d.beta.vec.FV().NumPy() if d.beta is not None else None
+        self.tangential = self.contact.tangential and d.side is not None and bool(d.side.T_tau)
+        delta = d.model.loads.delta  # the rod's end moves in time: the velocity is lifted on the clamp
+        self.v_clamp = None
+        if delta is not None and delta.depends_on("t"):
             self.v_clamp = d.u.vec.CreateVector()
-            self.v_clamp[:] = 0.0
-        self.k_last = 0.0
+            self.v_clamp.FV().NumPy()[:] = 0.0  # CreateVector does not initialise
+
+    def preflight(self, k_max: float) -> dict:
+        """Refuse k above the predicted stability limit (unless allow_unstable, recorded)."""
+        d = self.d
+        est = stability.critical_step(d, self.solver)
+        checks = {"k_crit": est.k_crit, "stability_override": 0} | self.bonding_check(k_max)
+        self._override = None
+        if k_max > est.k_crit:
+            if not d.scene["allow_unstable"]:
+                stability.check(k_max, est)
+            checks["stability_override"] = 1
+            self._override = (f"k = {k_max:.3g} s > predicted k_crit = {est.k_crit:.3g} s: running the explicit "
+                              "scheme anyway (allow_unstable)")
+        return checks
+
+    def warnings(self) -> list:
+        return ([self._override] if getattr(self, "_override", None) else []) + super().warnings()
 
     def step(self, t_prev: float, t_next: float) -> None:
         d, rhs = self.d, self.rhs
         k = t_next - t_prev
         d.load_vector(t_next, rhs)
-        rhs.data -= d.elastic.mat * d.u.vec
-        if d.contact_form is not None:
-            d.contact_form.Assemble()  # j(beta_{n-1}, u_{n-1}, .)
-            rhs.data -= d.contact_form.vec
-        if d.rate_form is not None:
-            d.rate_form.Assemble()  # P_B of the rate at (beta_{n-1}, u_{n-1}), before u moves
-            rate = d.rate_form.vec.FV().NumPy()[d.beta_dofs] / d.facet_measure
-        if self.moves_clamp:
+        self.work.data = d.elastic.mat * d.u.vec
+        self.rhs_np -= self.work_np
+        u = self.u_np
+        if d.side is not None:  # j(beta_{n-1}, u_{n-1}, .)
+            side = d.side
+            beta_f = self.beta_np[d.beta_dofs] if self.beta_np is not None else None
+            beta_q = beta_f[side.element] if beta_f is not None else None
+            p = self.contact.normal(NP, side.u_nu(u), beta_q)
+            q = self.contact.tangential_traction(NP, side.u_tau(u), beta_q) if self.tangential else None
+            if p is not None or q is not None:
+                self.rhs_np -= side.integrate(p, q)
+        if self.bonding is not None:  # P_B of the rate at (beta_{n-1}, u_{n-1}), before u moves
+            rs = d.rate_side
+            rate = np.empty(len(beta_f))
+            rate[rs.element] = self.bonding.rate(NP, beta_f[rs.element], rs.u_nu(u))
+        if self.v_clamp is not None:
             vc = self.v_clamp.FV().NumPy()
             vc[d.dirichlet_dofs] = (d.dirichlet_value(t_next) - d.dirichlet_value(t_prev)) / k
-            rhs.data -= d.viscous.mat * self.v_clamp
+            self.work.data = d.viscous.mat * self.v_clamp
+            self.rhs_np -= self.work_np
             self.solver.solve(self.rhs_np, self.v_np)
-            d.v.vec.data += self.v_clamp
+            self.v_np += vc
         else:
             self.solver.solve(self.rhs_np, self.v_np)
-        d.u.vec.data += k * d.v.vec
-        if d.rate_form is not None:
-            b = d.beta.vec.FV().NumPy()
-            b[d.beta_dofs] = np.clip(b[d.beta_dofs] - k * rate, 0.0, 1.0)
+        u += k * self.v_np
+        if self.bonding is not None:
+            self.beta_np[d.beta_dofs] = self.bonding.forward_step(beta_f, rate, k)
         self.k_last = k
-
-    def diagnostics(self, initial=False) -> dict:
-        return {}
-
-    def stress(self):
-        """sigma_n = A eps(v_n) + G eps(u_{n-1}), with u_{n-1} = u_n - k_n v_n."""
-        d = self.d
-        A, G = kelvin_voigt.tensors(d.scene)
-        eps = lambda f: kelvin_voigt.strain(f, d.dim)  # noqa: E731
-        return A(eps(d.v)) + G(eps(d.u) - self.k_last * eps(d.v))

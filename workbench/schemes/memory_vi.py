@@ -25,23 +25,26 @@ import numpy as np
 
 from .. import solvers
 from ..condensation import CondensedSystem
-from ..physics import kelvin_voigt, unilateral
 from ..errors import NewtonFailed
+from ..physics import unilateral
+from .base import Scheme
 
 
-class MemoryVI:
+class MemoryVI(Scheme):
+    """One variational inequality per step, memory by recursion or quadrature (module docs)."""
+
     name = "vi"
     max_iterations = 50
 
     def __init__(self, d):
-        self.d = d
-        sc = d.scene
-        self.solver = solvers.factor(d.elastic.mat, d.fes.FreeDofs(), d.u.vec, sc["solver"])
+        super().__init__(d)
+        self.layer = d.model.layer
+        self.solver = solvers.factor(d.elastic.mat, d.fes.FreeDofs(), d.u.vec, d.scene["solver"])
         free = np.array(d.fes.FreeDofs(), dtype=bool)
-        normal = d.node_dofs[:, -1]  # rod: u itself; slab/block: u_y / u_z on the flat contact side
+        normal = d.normal_dofs
         self.active_nodes = np.nonzero(free[normal])[0]  # a clamped contact vertex is not an unknown
         self.C = normal[self.active_nodes]
-        self.sign = 1.0 if d.dim == 1 else -1.0  # u_nu = sign * u_C
+        self.sign = d.geometry.normal_sign  # u_nu = sign * u_C
         self.w = d.contact_weights[self.active_nodes]
         self.S_inv = CondensedSystem(self.solver, d.ndof, self.C).S0_inv  # (sign^2 = 1: same in s)
         # z = s + rho lam / S_ii-scaled: the prox scaling comes from the body's own stiffness. A large factor
@@ -54,15 +57,12 @@ class MemoryVI:
         self.rhs_np = self.rhs.FV().NumPy()
         self.tmp = d.u.vec.CreateVector()
         self.work = d.u.vec.CreateVector()  # matvec results (allocated once, not per step)
-        self.lift = d.dim == 1 and not sc["delta"].is_zero()
         self.u_prev = d.u.vec.FV().NumPy().copy()
         # memory: Prony histories H_i (dof vectors) or the stored u_j for a general kernel
         n = d.ndof
         self.histories = [np.zeros(n) for _ in d.memory] if d.memory_kind == "prony" else []
         self.stored = np.empty((64, n)) if d.memory_kind == "kernel" else None
         self.times = [0.0]
-        self.mem_gfs = None
-        self.k_last = 0.0
         self.diag = {}
 
     def _memory_vector(self, t_prev, t_next, out_np):
@@ -78,7 +78,7 @@ class MemoryVI:
                 H *= decay
                 self._add_matvec(K, H, out_np)
         elif d.memory_kind == "kernel":
-            K, _, b = d.memory[0]
+            K = d.memory[0][0]
             n = len(self.times) - 1  # u_0 ... u_{n} stored after this append
             if n >= self.stored.shape[0]:  # grow the history buffer by doubling
                 grown = np.empty((2 * self.stored.shape[0], self.stored.shape[1]))
@@ -87,7 +87,7 @@ class MemoryVI:
             self.stored[n] = u_prev
             self.times.append(t_next)
             t = np.asarray(self.times)
-            weights = np.diff(t) * np.asarray(b(t=t[-1] - t[:-1]), dtype=float)
+            weights = d.model.memory.weights(t)
             H = weights @ self.stored[: n + 1]  # O(n) work: the whole history
             self.histories = [H]
             self._add_matvec(K, H, out_np)
@@ -119,13 +119,12 @@ class MemoryVI:
         u = d.u.vec.FV().NumPy()
         d.load_vector(time, self.rhs)
         self.rhs_np -= memory
-        if self.lift:  # u = delta(t_n) at x = 0
-            self.tmp.FV().NumPy()[:] = 0.0
-            self.tmp.FV().NumPy()[d.dirichlet_dofs] = d.dirichlet_value(time)
+        if d.moves_clamp:  # u = delta(t_n) at x = 0
+            d.lift(time, self.tmp.FV().NumPy())
             self.work.data = d.elastic.mat * self.tmp
             self.rhs_np -= self.work.FV().NumPy()
         self.solver.solve(self.rhs_np, self.z)
-        if self.lift:
+        if d.moves_clamp:
             self.z[d.dirichlet_dofs] = d.dirichlet_value(time)
         solves = 1
         if self.C.size:
@@ -147,8 +146,7 @@ class MemoryVI:
             "iterations": iterations, "linear_solves": solves + iterations,
             "n_separated": int(counts[0]), "n_stuck": int(counts[1]), "n_compliant": int(counts[2]),
             "n_rigid": int(counts[3]),
-            "complementarity": unilateral.complementarity(self.sign * u[self.C], self.lam, self.w, self.rho * self.w,
-                                                          d.scene["F"], d.scene["c"], d.scene["gap"])
+            "complementarity": self.layer.complementarity(self.sign * u[self.C], self.lam, self.w, self.rho * self.w)
             if self.C.size else 0.0,
         }
 
@@ -160,8 +158,7 @@ class MemoryVI:
         projected Gauss-Seidel on the (convex) condensed energy, which converges
         from anywhere, and PDAS finishes exactly.
         """
-        sc = self.d.scene
-        F, c, g = sc["F"], sc["c"], sc["gap"]
+        layer = self.layer
         rho_t = self.rho * self.w  # rho in traction units: z = s + rho_t * lam / w
         states = self.states.copy()
         total = 0
@@ -169,8 +166,8 @@ class MemoryVI:
             seen = set()
             for _ in range(self.max_iterations):
                 total += 1
-                s, lam = unilateral.solve_states(self.S_inv, s_free, self.w, F, c, g, states)
-                new = unilateral.state_of(s + rho_t * lam / self.w, rho_t, F, c, g)
+                s, lam = layer.solve_states(self.S_inv, s_free, self.w, states)
+                new = layer.state_of(s + rho_t * lam / self.w, rho_t)
                 if np.array_equal(new, states):
                     self.states = states
                     return s, lam, total
@@ -180,30 +177,31 @@ class MemoryVI:
                 seen.add(key)
                 states = new
             if attempt == 0:
-                states = self._gauss_seidel_states(s_free, F, c, g)
-        raise NewtonFailed(f"{sc.name}: the contact active-set iteration did not settle ({total} iterations) at "
+                states = self._gauss_seidel_states(s_free)
+        raise NewtonFailed(f"{self.d.scene.name}: the contact active-set iteration did not settle ({total} iterations) at "
                            f"t = {time:.6g} s; try a smaller k", time=time)
 
-    def _gauss_seidel_states(self, s_free, F, c, g, sweeps=2000, tol=1e-13):
+    def _gauss_seidel_states(self, s_free, sweeps=2000, tol=1e-13):
         """States of the condensed energy's minimiser by projected Gauss-Seidel (exact coordinate minimisation)."""
         S, w = self.S_inv, self.w
         b = S @ s_free
         diag = np.diag(S)
         rho = w / diag  # coordinate i: minimise (S_ii / 2) s^2 - y S_ii s + w psi(s) over s <= g -> prox
-        s = np.minimum(self.sign * self.d.u.vec.FV().NumPy()[self.C], g)
+        layer = self.layer
+        s = np.minimum(self.sign * self.d.u.vec.FV().NumPy()[self.C], layer.g)
         for _ in range(sweeps):
             change = 0.0
             for i in range(len(s)):
                 y = (b[i] - S[i] @ s + diag[i] * s[i]) / diag[i]
-                new = float(unilateral.prox(y, rho[i], F, c, g))
+                new = float(layer.prox(y, rho[i]))
                 change = max(change, abs(new - s[i]))
                 s[i] = new
             if change <= tol * (1.0 + np.abs(s).max()):
                 break
         lam = S @ (s_free - s)
-        return unilateral.state_of(s + self.rho * lam, self.rho * w, F, c, g)
+        return layer.state_of(s + self.rho * lam, self.rho * w)
 
-    def diagnostics(self, initial=False) -> dict:
+    def diagnostics(self) -> dict:
         return dict(self.diag)
 
     def node_values(self) -> dict:
@@ -214,18 +212,7 @@ class MemoryVI:
         state[self.active_nodes] = self.states
         return {"contact_pressure": pressure, "contact_state": state}
 
-    def stress(self):
+    def stress_parts(self) -> list:
         """sigma_n = A eps(u_n) + M_n (M_n from the memory histories)."""
-        import ngsolve as ngs
-
-        from ..physics import memory
-
         d = self.d
-        A = kelvin_voigt.scalar(d.scene["a"]) if d.dim == 1 else memory.tensor_of(d.scene["E"], d.scene["nu"], d.dim)
-        eps = lambda f: kelvin_voigt.strain(f, d.dim)  # noqa: E731
-        sigma = A(eps(d.u))
-        for H, (_, C, _) in zip(self.histories, d.memory):
-            g = ngs.GridFunction(d.fes)
-            g.vec.FV().NumPy()[:] = H
-            sigma = sigma + C(eps(g))
-        return sigma
+        return [(d.model.elastic, d.u.vec.FV().NumPy())] + [(C, H) for H, (_, C, _) in zip(self.histories, d.memory)]

@@ -23,7 +23,7 @@ from pathlib import Path
 import numpy as np
 import xarray as xr
 
-from .. import meshes, results, scenes
+from .. import results, scenes
 from ..errors import ParameterError
 from ..results import attr_value
 from . import evaluate, execute, reference
@@ -196,7 +196,7 @@ class Study:
 
     def _cost_estimate(self, case):
         sc = self.scene_of(case)
-        return float(np.prod(meshes.cells(sc))) * case.order ** sc.dim / case.k
+        return float(sc.body.n_cells()) * case.order ** sc.dim / case.k
 
     # -- evaluation ------------------------------------------------------------------------------------
     def _evaluate(self, runs, compare) -> xr.Dataset:

@@ -38,7 +38,7 @@ from pathlib import Path
 import numpy as np
 from matplotlib.tri import Triangulation
 
-from .plotting import FIELD_CMAP, _save, figure
+from ..plotting import FIELD_CMAP, _save, figure, plain
 
 #: Paper figure numbers of each problem's figure kinds (used in titles and by :func:`paper_figures`).
 FIGURE_NUMBERS = {
@@ -61,7 +61,7 @@ PAPER_REMARKS = {
 
 def _title(ds, kind, text):
     """Figure title: what, scene, discretisation, the paper figure it corresponds to, and any remark on it."""
-    scene = ds.attrs.get("scene", "?")
+    scene = plain(ds.attrs.get("scene", "?"))
     base = ds.attrs.get("base_scene", scene)
     fig_no = FIGURE_NUMBERS.get(base, {}).get(kind)
     paper = f" (cf. paper Fig. {fig_no})" if fig_no else ""

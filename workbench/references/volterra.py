@@ -47,7 +47,7 @@ Two solvers are provided:
 Examples
 --------
 >>> import numpy as np
->>> from workbench.volterra import solve_prony
+>>> from workbench.references.volterra import solve_prony
 >>> sol = solve_prony(a=1.0, moduli=[0.5], taus=[0.2], T=1.0, ell=1.0,
 ...                   delta=lambda t: 0.3 * np.sin(2 * np.pi * t) - 0.05,
 ...                   F=0.05, c=1.0, g=0.1)
@@ -66,6 +66,8 @@ from typing import Callable, NamedTuple
 import numpy as np
 from scipy.integrate import solve_ivp
 
+from ..physics import unilateral
+
 __all__ = [
     "SEPARATED",
     "STUCK",
@@ -79,13 +81,10 @@ __all__ = [
     "richardson",
 ]
 
-#: Contact state codes returned by the solvers.
-SEPARATED, STUCK, COMPLIANT, RIGID = 0, 1, 2, 3
+# the contact state codes are the finite-element code's (physics.unilateral): one definition
+SEPARATED, STUCK, COMPLIANT, RIGID = unilateral.SEPARATED, unilateral.STUCK, unilateral.COMPLIANT, unilateral.RIGID
 
 
-# --------------------------------------------------------------------------
-# input checks
-# --------------------------------------------------------------------------
 def _finite(name: str, value) -> float:
     try:
         v = float(value)
@@ -128,9 +127,6 @@ def _check_callable(name: str, fun, t0: float) -> None:
         raise ValueError(f"{name}(t) must return one finite value per t; {name}([{t0}]) = {v!r}")
 
 
-# --------------------------------------------------------------------------
-# the pointwise inclusion
-# --------------------------------------------------------------------------
 def contact_response(h, delta, *, a, ell, F, c, g):
     r"""Solve the pointwise contact inclusion for the strain, in closed form.
 
@@ -241,9 +237,6 @@ def _strain_scalar(h: float, delta: float, a, ell, F, c, g) -> float:
     return (g - delta) / ell
 
 
-# --------------------------------------------------------------------------
-# Prony kernel: memory as an ODE
-# --------------------------------------------------------------------------
 @dataclass(frozen=True)
 class PronySolution:
     r"""Solution of Model B with a Prony kernel, with dense output in time.
@@ -407,9 +400,6 @@ def solve_prony(*, a, moduli, taus, delta, T, ell=1.0, F, c, g, rtol=1e-10, atol
                          ode=ode, nfev=nfev, nsteps=nsteps)
 
 
-# --------------------------------------------------------------------------
-# general kernel: trapezoidal product quadrature
-# --------------------------------------------------------------------------
 class QuadratureSolution(NamedTuple):
     """Grid solution of :func:`solve_quadrature`; unpacks as ``t, A, sigma, w, state``."""
 

@@ -1,16 +1,13 @@
-"""Independent reference solutions: exact formulas and ODE solves that do not use the schemes.
+"""Rod references: exact formulas and ODE/Volterra solves of the 1D problems, independent of the schemes.
 
 * :func:`tp1_exact` — Test Problem 1 in closed form (SPEC, corrected exponents).
 * :func:`rod_ode` — any rod scene with u0 = delta(0) reduces to an ODE for the
   end strain A(t) and beta(t) (SPEC, Appendix A of the paper), integrated here
   with SciPy's Radau method to tight tolerance.
 * :func:`rod_memory` — a Model B rod scene: the scalar Volterra inclusion solved by
-  :mod:`workbench.volterra` (Prony kernels: an ODE for the memory variables; a general
+  :mod:`workbench.references.volterra` (Prony kernels: an ODE for the memory variables; a general
   kernel: the product trapezoid rule on a fine grid, Richardson-extrapolated).
 * :func:`rod_reference` — whichever of the two fits the scene's model.
-* :func:`modal_linear` — the exact-in-time solution of the semi-discrete linear
-  Kelvin–Voigt system K_A u' + K_G u = t F1 (no contact), by the generalised
-  eigen-decomposition K_G phi = lambda K_A phi; isolates a scheme's time error.
 
 Examples
 --------
@@ -70,13 +67,16 @@ def tp1_exact():
                        beta=lambda t: np.exp(-gamma * L * L * t))
 
 
-def rod_ode(scene, rtol=1e-11, atol=1e-13):
-    """Reference for a rod scene: solve b A' + a A = -p_nu(u_end) + gamma beta^2 (-R(u_end))_+ with u_end = delta + A length.
+def rod_ode(scene, rtol=1e-11, atol=1e-13, model=None):
+    """Reference for a Model A rod scene: b A' + a A = -p_nu(u_end) + gamma beta^2 (-R(u_end))_+, u_end = delta + A length.
 
-    Derivation (SPEC): with u0 = delta(0) constant the displacement stays
-    u = delta(t) + A(t) x, so sigma = a A + b A' is constant in x and the
-    contact condition at x = length gives the ODE above, together with
+    Derivation (docs/models.md): with u0 = delta(0) constant the displacement stays
+    u = delta(t) + A(t) x, so sigma = a A + b A' is constant in x and the contact
+    condition at x = length gives the ODE above, together with
     beta' = -(gamma beta R_b(u_end)^2 - eps_a)_+ (R_b the scene's bonding truncation).
+    The laws are written here again as scalar formulas (independent of the
+    finite-element code); only their numbers come from the scene's model (or from
+    ``model``, e.g. one with the adhesive pull's sign flipped).
 
     Returns
     -------
@@ -86,35 +86,42 @@ def rod_ode(scene, rtol=1e-11, atol=1e-13):
     """
     from scipy.integrate import solve_ivp
 
-    v = scene.values
-    if scene.geometry != "rod":
-        raise ValueError(f"rod_ode needs a rod scene, got geometry {scene.geometry!r}")
-    if not np.allclose(v["u0"](x=np.linspace(0, v["length"], 7)), v["delta"](t=0.0)):
+    model = model or scene.model_of()
+    if model.geometry.dim != 1 or model.kind != "A":
+        raise ValueError(f"rod_ode needs a Model A rod scene, got {scene.name!r}")
+    loads = model.loads
+    delta, ell = loads.delta, model.geometry.extent[0]
+    if not np.allclose(loads.u0(x=np.linspace(0, ell, 7)), delta(t=0.0)):
         raise ValueError("rod_ode needs u0 = delta(0) (constant): only then is u linear in x")
-    a, b, ell, L, g = v["a"], v["b"], v["length"], v["L"], v["gap"]
-    c_nu = v["c_nu"] if v["contact"] else 0.0
-    gamma = v["gamma_nu"] if v["adhesion"] else 0.0
-    delta = v["delta"]
+    terms = {t.name.split("_")[0]: t for t in model.contact.terms}
+    unknown = set(terms) - {"compliance", "adhesion"}
+    if unknown:
+        raise ValueError(f"rod_ode knows the compliance and the adhesive pull only, not {sorted(unknown)}")
+    a, b = model.elastic.modulus, model.viscous.modulus
+    comp, pull, law = terms.get("compliance"), terms.get("adhesion"), model.bonding
+    c_nu, m_nu, g = (comp.c_nu, comp.m_nu, comp.gap) if comp else (0.0, 1.0, 0.0)
+    gamma, L, sign = (pull.gamma_nu, pull.L, pull.sign) if pull else (0.0, 1.0, 1.0)
 
-    def clip(s):
-        return min(max(s, -L), L)
-
-    def bond_r(s):
-        return clip(s) if v["bonding_truncation"] == "symmetric" else max(-clip(s), 0.0)
+    def clip(s, length):
+        return min(max(s, -length), length)
 
     def rhs(t, y):
         A, beta = y
         end = delta(t=t) + A * ell
-        push = c_nu * max(end - g, 0.0) ** v["m_nu"]
-        pull = gamma * beta * beta * max(-clip(end), 0.0)
-        rate = max(gamma * beta * bond_r(end) ** 2 - v["eps_a"], 0.0)
-        return [(-push + pull - a * A) / b, -rate]
+        push = c_nu * max(end - g, 0.0) ** m_nu
+        adhesive = sign * gamma * beta * beta * max(-clip(end, L), 0.0)
+        rate = 0.0
+        if law is not None:
+            r = clip(end, law.L) if law.truncation == "symmetric" else max(-clip(end, law.L), 0.0)
+            rate = max(law.gamma_nu * beta * r ** 2 - law.eps_a, 0.0)
+        return [(-push + adhesive - a * A) / b, -rate]
 
     # The right-hand side is only Lipschitz (kinks at end = 0, +-L, g): limit the step
     # so kinks are resolved; Radau's error control then does the rest.
-    T = v["T"]
-    sol = solve_ivp(rhs, (0.0, T), [0.0, v["beta0"] if v["adhesion"] else 1.0], method="Radau",
-                    rtol=rtol, atol=atol, dense_output=True, max_step=T / 2000)
+    T = scene["T"]
+    beta0 = model.beta0 if law is not None else 1.0
+    sol = solve_ivp(rhs, (0.0, T), [0.0, beta0], method="Radau", rtol=rtol, atol=atol, dense_output=True,
+                    max_step=T / 2000)
     if not sol.success:
         raise RuntimeError(f"reference ODE failed: {sol.message}")
 
@@ -131,10 +138,10 @@ def rod_memory(scene, n=4000):
     """Reference for a Model B rod scene (memory, unilateral layer), as a :class:`RodSolution` without beta.
 
     With a Prony kernel the memory variables obey an ODE, integrated by
-    :func:`workbench.volterra.solve_prony` (DOP853, rtol 1e-10); a general kernel
-    b(t) kernel_E is integrated by :func:`workbench.volterra.solve_quadrature` with
-    ``n`` and ``2 n`` steps and Richardson-extrapolated, then interpolated
-    linearly in t (error O((T/n)^2)).
+    :func:`workbench.references.volterra.solve_prony` (DOP853, rtol 1e-10); a general
+    kernel b(t) kernel_E is integrated by :func:`~workbench.references.volterra.solve_quadrature`
+    with ``n`` and ``2 n`` steps and Richardson-extrapolated, then interpolated linearly in t
+    (error O((T/n)^2)).
 
     Examples
     --------
@@ -146,51 +153,29 @@ def rod_memory(scene, n=4000):
     """
     from . import volterra
 
-    v = scene.values
-    if scene.geometry != "rod" or scene.model != "B":
+    model = scene.model_of()
+    if model.geometry.dim != 1 or model.kind != "B":
         raise ValueError(f"rod_memory needs a Model B rod scene, got {scene.name!r}")
-    delta = v["delta"]
-    common = dict(a=v["a"], ell=v["length"], F=v["F"], c=v["c"], g=v["gap"], T=v["T"],
+    delta = model.loads.delta
+    layer = model.layer
+    common = dict(a=model.elastic.modulus, ell=model.geometry.extent[0], F=layer.F, c=layer.c, g=layer.g, T=scene["T"],
                   delta=lambda t: np.broadcast_to(np.asarray(delta(t=t), dtype=float), np.shape(t)))
     nan = lambda t: np.full(np.shape(t), np.nan)  # noqa: E731
-    if v["prony"] or "memory" not in scene.terms:
-        moduli = [term[0] for term in v["prony"]]
-        taus = [term[-1] for term in v["prony"]]
-        sol = volterra.solve_prony(moduli=moduli, taus=taus, **common)
-        return RodSolution(delta=lambda t: common["delta"](np.asarray(t, float)).copy(), strain=sol.A,
-                           strain_rate=None, beta=nan, a=v["a"], b=0.0, stress=sol.sigma)
-    kernel = v["kernel"]
-    b = lambda t: v["kernel_E"] * np.broadcast_to(np.asarray(kernel(t=t), dtype=float), np.shape(t))  # noqa: E731
+    lift = lambda t: common["delta"](np.asarray(t, float)).copy()  # noqa: E731
+    memory = model.memory
+    if memory is None or memory.kind == "prony":
+        terms = memory.terms if memory is not None else []
+        sol = volterra.solve_prony(moduli=[C.modulus for C, _ in terms], taus=[tau for _, tau in terms], **common)
+        return RodSolution(delta=lift, strain=sol.A, strain_rate=None, beta=nan, a=common["a"], b=0.0,
+                           stress=sol.sigma)
+    shape, modulus = memory.shape, memory.tensor.modulus
+    b = lambda t: modulus * np.broadcast_to(np.asarray(shape(t=t), dtype=float), np.shape(t))  # noqa: E731
     ext = volterra.richardson(volterra.solve_quadrature(kernel=b, n=n, **common),
                               volterra.solve_quadrature(kernel=b, n=2 * n, **common))
-    A = lambda t: np.interp(t, ext.t, ext.A)  # noqa: E731
-    return RodSolution(delta=lambda t: common["delta"](np.asarray(t, float)).copy(), strain=A, strain_rate=None,
-                       beta=nan, a=v["a"], b=0.0, stress=lambda t: np.interp(t, ext.t, ext.sigma))
+    return RodSolution(delta=lift, strain=lambda t: np.interp(t, ext.t, ext.A), strain_rate=None, beta=nan,
+                       a=common["a"], b=0.0, stress=lambda t: np.interp(t, ext.t, ext.sigma))
 
 
 def rod_reference(scene):
     """The independent reference of a rod scene: :func:`rod_ode` (Model A) or :func:`rod_memory` (Model B)."""
     return rod_memory(scene) if scene.model == "B" else rod_ode(scene)
-
-
-def modal_linear(K_A: np.ndarray, K_G: np.ndarray, F1: np.ndarray, free: np.ndarray):
-    """Exact solution of K_A u' + K_G u = t F1, u(0) = 0, on the free dofs (dense, small systems).
-
-    With K_G phi_i = lambda_i K_A phi_i (phi_i K_A-orthonormal), u = sum q_i phi_i
-    and q_i' + lambda_i q_i = t c_i, c_i = phi_i . F1, so
-    q_i(t) = c_i / lambda_i (t - (1 - exp(-lambda_i t)) / lambda_i).
-    """
-    from scipy.linalg import eigh
-
-    A = K_A[np.ix_(free, free)]
-    G = K_G[np.ix_(free, free)]
-    lam, phi = eigh(G, A)
-    c = phi.T @ F1[free]
-
-    def solution(t):
-        q = c / lam * (t - (-np.expm1(-lam * t)) / lam)
-        u = np.zeros(len(F1))
-        u[free] = phi @ q
-        return u
-
-    return solution

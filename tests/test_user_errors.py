@@ -1,0 +1,703 @@
+"""User mistakes are caught, named and refused before any work (issue 9, items 9-14).
+
+The contract pinned here:
+
+* **Command line.** A user's mistake exits with code 2 and writes exactly one non-empty line to stderr,
+  ``error: ...``, which names the offending parameter, option or file, holds no ``Traceback`` and is
+  readable (at most 1000 characters, so a 30000-term expression is not echoed back). It happens before
+  any work: quickly, and no output file or folder is created (not even the valid ones asked for in the
+  same call). Only internal defects may show a traceback.
+* **Python API.** :class:`workbench.ParameterError` (a ``ValueError``) whose message names the parameter.
+* **Outputs.** Every ``-o``, ``--plot`` and ``--vtk`` target is checked before the run; if writing still
+  fails at the end (disk full) the result is kept elsewhere and the message says where. Stale hidden
+  ``.NAME.*.tmp`` files are cleaned up by the next write of NAME; damaged study cases are recomputed.
+* **Names reaching the file system** (a TOML ``name``) are sanitised: files stay inside the requested folder.
+
+Command-line cases run in subprocesses (``python -m workbench.cli``); to keep the file fast on two cores,
+the next command-line case (in file order) is started while the current one is checked (see :class:`_Runner`).
+"""
+from __future__ import annotations
+
+import errno
+import json
+import os
+import re
+import shutil
+import subprocess
+import sys
+import time
+from concurrent.futures import ThreadPoolExecutor
+from dataclasses import dataclass
+from pathlib import Path
+
+import numpy as np
+import pytest
+import xarray as xr
+
+import workbench
+from workbench import ParameterError
+
+#: A refusal must come before any work: well within this many seconds (the import alone takes ~2 s).
+FAST = 15.0
+#: Address-space cap for the cases that today build huge meshes or grids (so they cannot exhaust the machine).
+MEMCAP = 4 << 30
+#: A clear error line is not an echo of a 60 kB expression.
+MAX_LINE = 1000
+
+RUN_TINY = ("--h", "0.1", "--k", "0.05", "--no-progress")
+
+
+# ------------------------------------------------------------------------------------------------------
+# running the command line
+# ------------------------------------------------------------------------------------------------------
+@dataclass(frozen=True)
+class Cli:
+    """One command-line call: ``args`` (``{D}`` is replaced by the case folder), files made by ``setup(d)``,
+    and the names of which the error line must contain at least one."""
+
+    args: tuple
+    names: tuple = ()
+    setup: object = None
+    timeout: float = 60.0
+    memcap: bool = False
+
+
+@dataclass
+class Result:
+    args: list
+    cwd: Path
+    before: set
+    rc: int | None
+    out: str
+    err: str
+    elapsed: float
+    timed_out: bool = False
+    timeout: float = 0.0
+
+    def new_paths(self) -> list[str]:
+        return sorted(_listing(self.cwd) - self.before)
+
+    def lines(self) -> list[str]:
+        return [line for line in self.err.splitlines() if line.strip()]
+
+    def show(self) -> str:
+        tail = self.err[-3000:]
+        return (f"\n$ workbench {' '.join(self.args)[:300]}\n(cwd {self.cwd}) exit {self.rc} after {self.elapsed:.1f} s"
+                f"{' (TIMED OUT)' if self.timed_out else ''}\n--- stdout:\n{self.out[-1000:]}\n--- stderr:\n{tail}")
+
+
+def _listing(d: Path) -> set:
+    """Every file and folder below ``d`` (relative), without following into unreadable folders."""
+    out = set()
+    for root, dirs, files in os.walk(d):
+        for n in dirs + files:
+            out.add(str((Path(root) / n).relative_to(d)))
+    return out
+
+
+def _command(args, memcap):
+    if not memcap:
+        return [sys.executable, "-m", "workbench.cli", *args]
+    code = ("import resource, runpy; resource.setrlimit(resource.RLIMIT_AS, (%d, %d)); "
+            "runpy.run_module('workbench.cli', run_name='__main__', alter_sys=True)" % (MEMCAP, MEMCAP))
+    return [sys.executable, "-c", code, *args]
+
+
+def _execute(args, cwd: Path, timeout: float = 60.0, memcap: bool = False, before=None) -> Result:
+    before = _listing(cwd) if before is None else before
+    env = dict(os.environ, PYTHONUNBUFFERED="1")
+    t0 = time.perf_counter()
+    try:
+        p = subprocess.run(_command(args, memcap), cwd=cwd, capture_output=True, text=True, timeout=timeout, env=env)
+        rc, out, err, timed_out = p.returncode, p.stdout, p.stderr, False
+    except subprocess.TimeoutExpired as e:
+        dec = (lambda b: b.decode(errors="replace") if isinstance(b, bytes) else (b or ""))
+        rc, out, err, timed_out = None, dec(e.stdout), dec(e.stderr), True
+    return Result(list(args), cwd, before, rc, out, err, time.perf_counter() - t0, timed_out, timeout)
+
+
+class _Runner:
+    """Runs the command-line cases, starting the next one (in file order) while the current one is checked.
+
+    Every case list is registered with :func:`_cases` in the order its test runs, so while a test checks its
+    result the next subprocess already runs on the other core. Under pytest-xdist nothing is started ahead
+    (the other worker may own the next case).
+    """
+
+    order: list = []  # (group, key) in file order
+
+    def __init__(self, factory):
+        self.factory = factory
+        self.pool = ThreadPoolExecutor(max_workers=2)
+        self.futures = {}
+        self.ahead = 0 if os.environ.get("PYTEST_XDIST_WORKER") else 1
+
+    def _submit(self, group: str, key: str):
+        if (group, key) in self.futures:
+            return
+        spec = _GROUPS[group][key]
+        d = self.factory.mktemp(re.sub(r"[^A-Za-z0-9]+", "_", f"{group}_{key}")[:40])
+        if spec.setup is not None:
+            spec.setup(d)
+        args = [a.replace("{D}", str(d)) for a in spec.args]
+        before = _listing(d)
+        self.futures[group, key] = self.pool.submit(_execute, args, d, spec.timeout, spec.memcap, before)
+
+    def __call__(self, group: str, key: str) -> Result:
+        i = self.order.index((group, key))
+        for g, k in self.order[i:i + 1 + self.ahead]:
+            self._submit(g, k)
+        return self.futures[group, key].result()
+
+    def close(self):
+        self.pool.shutdown(wait=True)
+
+
+_GROUPS: dict = {}
+
+
+def _cases(group: str, cases: dict) -> dict:
+    """Register a parametrised list of command-line cases (in the order the tests run)."""
+    _GROUPS[group] = cases
+    _Runner.order.extend((group, key) for key in cases)
+    return cases
+
+
+@pytest.fixture(scope="module")
+def cli(tmp_path_factory):
+    runner = _Runner(tmp_path_factory)
+    yield runner
+    runner.close()
+
+
+def _names(line: str, name: str) -> bool:
+    if re.fullmatch(r"\w+", name):
+        return re.search(rf"(?<![A-Za-z0-9_]){re.escape(name)}(?![A-Za-z0-9_])", line) is not None
+    return name in line
+
+
+def assert_refused(res: Result, *names: str, fast: bool = True, no_outputs: bool = True) -> str:
+    """Exit 2, one line ``error: ...`` naming one of ``names``, no traceback, before any work."""
+    assert not res.timed_out, f"still running after {res.timeout:.0f} s: must be refused before any work" + res.show()
+    assert "Traceback" not in res.err, "a user's mistake must not end in a traceback" + res.show()
+    assert res.rc == 2, f"exit code {res.rc}, expected 2 (bad input)" + res.show()
+    lines = res.lines()
+    assert len(lines) == 1, f"stderr has {len(lines)} lines, expected exactly one 'error: ...' line" + res.show()
+    line = lines[0]
+    assert line.startswith("error: "), res.show()
+    assert len(line) <= MAX_LINE, f"error line of {len(line)} characters" + res.show()
+    if names:
+        assert any(_names(line, n) for n in names), f"the error line does not name {' or '.join(names)}" + res.show()
+    if fast:
+        assert res.elapsed < FAST, f"refused only after {res.elapsed:.1f} s: check before any work" + res.show()
+    if no_outputs:
+        assert not res.new_paths(), f"created {res.new_paths()} although the input was refused" + res.show()
+    return line
+
+
+def _files(**named):
+    """A setup writing files: name -> text (str) or bytes; a name ending in '/' makes a folder."""
+    def setup(d: Path):
+        for name, content in named.items():
+            p = d / name
+            if name.endswith("/"):
+                p.mkdir(parents=True)
+                continue
+            p.parent.mkdir(parents=True, exist_ok=True)
+            (p.write_bytes if isinstance(content, bytes) else p.write_text)(content)
+    return setup
+
+
+def _mkdirs(*names):
+    return _files(**{n.rstrip("/") + "/": None for n in names})
+
+
+def _readonly(d: Path):
+    """``readonly_dir`` that cannot be written into; as root (permissions do not stop writes) a regular file."""
+    ro = d / "readonly_dir"
+    ro.mkdir()
+    os.chmod(ro, 0o555)
+    if os.access(ro, os.W_OK):
+        os.chmod(ro, 0o755)
+        ro.rmdir()
+        ro.write_text("a regular file where a folder is needed\n")
+
+
+# ------------------------------------------------------------------------------------------------------
+# item 9: inputs that end in a Python traceback today
+# ------------------------------------------------------------------------------------------------------
+OUT = ("-o", "out.nc")
+STUDY = ("study", "tp1", "--k", "0.1", "0.05", "--h", "0.1", "--workers", "0", "--no-progress", "-o", "st.nc")
+SLAB_TINY = ("--h", "0.1", "--T", "0.01", "--no-progress")
+LONG_SUM = "+".join(["t"] * 30000)
+
+ITEM9 = _cases("item9", {
+    "toml-binary": Cli(("run", "bin.toml", *RUN_TINY, *OUT), ("bin.toml",),
+                       _files(**{"bin.toml": bytes(range(256)) * 4})),
+    "toml-is-a-directory": Cli(("run", "d.toml", *RUN_TINY, *OUT), ("d.toml",), _mkdirs("d.toml")),
+    "toml-parameters=5": Cli(("run", "s.toml", *RUN_TINY, *OUT), ("parameters",),
+                             _files(**{"s.toml": 'scene = "slab"\nparameters = 5\n'})),
+    "toml-scene=[slab]": Cli(("run", "s.toml", *RUN_TINY, *OUT), ("scene",),
+                             _files(**{"s.toml": 'scene = ["slab"]\n'})),
+    "toml-traction=5": Cli(("run", "s.toml", *RUN_TINY, *OUT), ("traction",),
+                           _files(**{"s.toml": 'scene = "slab"\ntraction = 5\n'})),
+    "rod-delta=1/t": Cli(("run", "rod", *RUN_TINY, "--set", "delta=1/t", *OUT), ("delta",)),
+    "rod-delta=1/0": Cli(("run", "rod", *RUN_TINY, "--set", "delta=1/0", *OUT), ("delta",)),
+    "rod-delta=10**400": Cli(("run", "rod", *RUN_TINY, "--set", "delta=10**400", *OUT), ("delta",)),
+    "rod-u0=1/x": Cli(("run", "rod", *RUN_TINY, "--set", "u0=1/x", *OUT), ("u0",)),
+    "slab-traction=1/0": Cli(("run", "slab", *SLAB_TINY, "--set", "traction_top=(0, 1/0)", *OUT), ("traction_top",)),
+    "literal-401-digits": Cli(("run", "slab", *SLAB_TINY, "--set", "traction_top=(0, " + "1" * 401 + ")", *OUT),
+                              ("traction_top",)),
+    "expression-30000-terms": Cli(("run", "slab", *SLAB_TINY, "--set", f"traction_top=(0, {LONG_SUM})", *OUT),
+                                  ("traction_top",), memcap=True),
+    "expression-5000-deep-minus": Cli(("run", "slab", *SLAB_TINY, "--set", "traction_top=(0, " + "-" * 5000 + "t)",
+                                       *OUT), ("traction_top",), memcap=True),
+    "expression-5000-deep-parentheses": Cli(("run", "slab", *SLAB_TINY, "--set",
+                                             "traction_top=(0, " + "(" * 5000 + "t" + ")" * 5000 + ")", *OUT),
+                                            ("traction_top",)),
+    "expression-5000-power-tower": Cli(("run", "slab", *SLAB_TINY, "--set",
+                                        "traction_top=(0, " + "**".join(["t"] * 5000) + ")", *OUT),
+                                       ("traction_top",), memcap=True),
+    "--k 1e-300": Cli(("run", "tp1", "--h", "0.1", "--k", "1e-300", "--no-progress", *OUT), ("k",),
+                      timeout=FAST + 5, memcap=True),
+    "--set T=1e9": Cli(("run", "tp1", "--h", "0.1", "--set", "T=1e9", "--no-progress", *OUT), ("T",),
+                       timeout=FAST + 5, memcap=True),
+    "--h 1e-4 (cannot fit in memory)": Cli(("run", "slab", "--h", "1e-4", "--T", "0.01", "--no-progress", *OUT),
+                                           ("h",), timeout=FAST + 5, memcap=True),
+    "E=1e200-explicit": Cli(("run", "slab", *SLAB_TINY, "--set", "E=1e200", *OUT), ("E", "k_crit")),
+    "m_nu=1e10": Cli(("run", "tp1", *RUN_TINY, "--set", "m_nu=1e10", "--set", "L=10", *OUT), ("m_nu", "L", "k_crit")),
+    "study --reference h=abc": Cli((*STUDY, "--reference", "h=abc"), ("reference",)),
+    "study --compare 0": Cli((*STUDY, "--reference", "ode", "--compare", "0"), ("compare", "n_compare")),
+    "study --compare -3": Cli((*STUDY, "--reference", "ode", "--compare", "-3"), ("compare", "n_compare")),
+})
+
+
+@pytest.mark.parametrize("key", list(ITEM9))
+def test_traceback_inputs_are_one_line_errors(cli, key):
+    """Each of these inputs ends in a Python traceback (or a 10 kB echo) today. Expected: exit 2, one line
+    ``error: ...`` naming the parameter, option or file, printed before any mesh, grid or case is built
+    (fast, no output file created). Huge grids and meshes are estimated (steps, dofs, memory) and refused."""
+    assert_refused(cli("item9", key), *ITEM9[key].names)
+
+
+MATHTEXT = _cases("mathtext", {
+    "run --plot": Cli(("run", "s.toml", *RUN_TINY, "--T", "0.2", "--plot", "p.png"), ("name",),
+                      _files(**{"s.toml": 'scene = "tp1"\nname = "$x^$"\n'})),
+})
+
+
+@pytest.mark.parametrize("key", list(MATHTEXT))
+def test_scene_name_with_dollars_and_plot(cli, key):
+    """A TOML ``name`` with ``$...$`` (not valid mathtext) and ``--plot``: today the run completes and then
+    matplotlib's mathtext parser raises a traceback while saving. Expected: the name is shown literally and the
+    plot is written (exit 0, no traceback), or it is refused before the run (exit 2, one line naming ``name``)."""
+    res = cli("mathtext", key)
+    assert "Traceback" not in res.err, res.show()
+    if res.rc == 0:
+        assert (res.cwd / "p.png").is_file() and (res.cwd / "p.png").stat().st_size > 1000, res.show()
+    else:
+        assert_refused(res, "name")
+
+
+# ------------------------------------------------------------------------------------------------------
+# item 10: output paths checked before the run
+# ------------------------------------------------------------------------------------------------------
+def _path_cases():
+    base = ("run", "tp1", *RUN_TINY)
+    return {
+        "-o is a directory": Cli((*base, "-o", "out.nc", "--plot", "good.png"), ("out.nc",), _mkdirs("out.nc")),
+        "-o parent is a file": Cli((*base, "-o", "a_file/out.nc", "--plot", "good.png"), ("a_file",),
+                                   _files(a_file="x\n")),
+        "-o in a read-only folder": Cli((*base, "-o", "readonly_dir/out.nc", "--plot", "good.png"), ("readonly_dir",),
+                                        _readonly),
+        "--plot is a directory": Cli((*base, "-o", "good.nc", "--plot", "out.png"), ("out.png",), _mkdirs("out.png")),
+        "--plot parent is a file": Cli((*base, "-o", "good.nc", "--plot", "a_file/out.png"), ("a_file",),
+                                       _files(a_file="x\n")),
+        "--plot in a read-only folder": Cli((*base, "-o", "good.nc", "--plot", "readonly_dir/out.png"),
+                                            ("readonly_dir",), _readonly),
+        "--vtk is a regular file": Cli((*base, "-o", "good.nc", "--vtk", "vtkdir"), ("vtkdir",), _files(vtkdir="x\n")),
+        "--vtk parent is a file": Cli((*base, "-o", "good.nc", "--vtk", "a_file/vtkdir"), ("a_file",),
+                                      _files(a_file="x\n")),
+        "--vtk in a read-only folder": Cli((*base, "-o", "good.nc", "--vtk", "readonly_dir/vtkdir"),
+                                           ("readonly_dir",), _readonly),
+    }
+
+
+PATHS = _cases("paths", _path_cases())
+
+
+@pytest.mark.parametrize("key", list(PATHS))
+def test_bad_output_path_refused_before_the_run(cli, key):
+    """An ``-o``, ``--plot`` or ``--vtk`` target that cannot be written (an existing directory where a file is
+    wanted or a file where a folder is wanted, a read-only folder, a parent that is a regular file) is found
+    before any work: exit 2, one line naming the path, and no output at all, not even the valid one asked for
+    in the same call. Today the run is done first and then lost in a traceback (or written despite
+    the target, e.g. ``--plot`` onto a folder writes ``out.png.png``)."""
+    assert_refused(cli("paths", key), *PATHS[key].names)
+
+
+def test_disk_full_at_the_end_keeps_the_result(tmp_path, monkeypatch, capsys):
+    """If writing ``-o`` still fails after the run (here: the disk is full), the computed result is not lost:
+    it is kept in another file, the message says where (that file exists and loads as the run's result),
+    the exit code is non-zero, there is no traceback, and no temporary file is left in the full folder."""
+    from workbench import cli as cli_module
+
+    full = tmp_path / "full"
+    full.mkdir()
+    target = full / "out.nc"
+    real = xr.Dataset.to_netcdf
+
+    def no_space(self, path=None, *args, **kwargs):
+        if path is not None and Path(path).resolve().parent == full.resolve():
+            raise OSError(errno.ENOSPC, "No space left on device", str(path))
+        return real(self, path, *args, **kwargs)
+
+    monkeypatch.setattr(xr.Dataset, "to_netcdf", no_space)
+    monkeypatch.chdir(tmp_path)
+    try:
+        code = cli_module.main(["run", "tp1", "--h", "0.5", "--k", "0.5", "--no-progress", "-o", str(target)])
+    except SystemExit as e:
+        code = e.code
+    except Exception as e:  # noqa: BLE001
+        pytest.fail(f"a full disk ends in a traceback: {type(e).__name__}: {e}")
+    cap = capsys.readouterr()
+    text = cap.out + "\n" + cap.err
+    assert code not in (0, None), f"exit {code} although {target} was not written\n{text}"
+    assert "Traceback" not in cap.err and "out.nc" in cap.err, text
+    kept = []
+    for token in re.findall(r"[^\s'\"`]+", text):
+        token = token.rstrip(".,;:)]}").lstrip("([{")
+        p = Path(token)
+        if token and p.is_file() and p.resolve() != target.resolve():
+            kept.append(p.resolve())
+    assert kept, f"the message does not say where the result was kept\n{text}"
+    try:
+        ds = workbench.load(kept[0])
+        assert ds.attrs["scene"] == "tp1" and "u_probe" in ds and ds.attrs["status"] == "complete"
+    finally:
+        for p in kept:
+            if tmp_path not in p.parents:
+                p.unlink(missing_ok=True)
+    assert not list(full.iterdir()), f"left behind in the full folder: {list(full.iterdir())}"
+
+
+# ------------------------------------------------------------------------------------------------------
+# item 11: damaged study cases and stale temporary files
+# ------------------------------------------------------------------------------------------------------
+STUDY11 = ("study", "tp1", "--k", "0.1", "0.05", "--h", "0.1", "--reference", "ode", "--workers", "0",
+           "--no-progress", "-o", "st.nc")
+
+
+@pytest.fixture(scope="module")
+def study_archive(tmp_path_factory):
+    d = tmp_path_factory.mktemp("study11")
+    res = _execute(STUDY11, d)
+    assert res.rc == 0, res.show()
+    return d
+
+
+@pytest.mark.parametrize("damage", ["empty", "truncated"])
+def test_damaged_case_file_is_recomputed(study_archive, tmp_path, damage):
+    """A study rerun whose case folder holds an empty or truncated case file (a killed or full-disk write)
+    crashes today with an ``OSError`` traceback. Expected: the damaged case is detected, recomputed and rewritten
+    (the others are left untouched), a warning on stderr names the file, a stale hidden ``.NAME.*.tmp`` of that
+    case is removed by the rewrite, the run exits 0, and the study result equals the undamaged one."""
+    work = tmp_path / "w"
+    shutil.copytree(study_archive, work)
+    cases = sorted((work / "st.nc.cases").glob("*.nc"))
+    assert len(cases) == 2
+    bad, good = cases
+    data = bad.read_bytes()
+    bad.write_bytes(b"" if damage == "empty" else data[: len(data) // 2])
+    stale = bad.parent / f".{bad.name}.k1ll3d_q.tmp"  # as left by a kill today
+    stale.write_bytes(data[:100])
+    old = time.time() - 3600
+    os.utime(stale, (old, old))
+    good_bytes, good_mtime = good.read_bytes(), good.stat().st_mtime_ns
+    original = workbench.load(study_archive / "st.nc")
+
+    res = _execute(STUDY11, work)
+    assert "Traceback" not in res.err, res.show()
+    assert res.rc == 0, res.show()
+    assert bad.name in res.err, "the warning must name the damaged case file" + res.show()
+    workbench.load(bad)  # rewritten, readable
+    assert good.read_bytes() == good_bytes and good.stat().st_mtime_ns == good_mtime, "an intact case was rewritten"
+    assert not stale.exists(), "the stale temporary file of the rewritten case was not removed"
+    again = workbench.load(work / "st.nc")
+    for name in ("error", "error_V", "error_Q", "error_beta"):
+        np.testing.assert_allclose(again[name].values, original[name].values, rtol=1e-12, equal_nan=True)
+
+
+def test_next_write_removes_stale_tmp_files_of_the_same_target(tmp_path):
+    """A kill during :func:`workbench.write` leaves ``.X.nc.<random>.tmp`` behind; today nothing ever removes
+    it. Expected: the next ``write`` of ``X.nc`` removes the stale temporaries of ``X.nc`` (older than the write:
+    today's ``.X.nc.<8 random>.tmp`` and a ``.X.nc.<pid>.<hex>.tmp`` of a process that is gone), and only those:
+    a temporary still being written (newer than the write, its process alive), temporaries of other targets
+    (``Y.nc``, ``X.nc2``) and other files are kept."""
+    ds = workbench.run("tp1", h=0.5, k=0.5, progress=False)
+    gone = subprocess.Popen([sys.executable, "-c", "pass"])
+    gone.wait()
+    old, future = time.time() - 3600, time.time() + 600
+    stale = [tmp_path / ".X.nc.abc123xy.tmp", tmp_path / f".X.nc.{gone.pid}.0badc0de.tmp"]
+    keep = [tmp_path / ".Y.nc.abc123xy.tmp", tmp_path / ".X.nc2.abc123xy.tmp", tmp_path / "X.nc.notes.txt"]
+    busy = tmp_path / f".X.nc.{os.getppid()}.feedbeef.tmp"  # another live writer, still at work
+    for p in stale + keep + [busy]:
+        p.write_bytes(b"partial")
+        os.utime(p, (future, future) if p == busy else (old, old))
+    workbench.write(ds, tmp_path / "X.nc")
+    assert [p.name for p in stale if p.exists()] == [], "stale temporaries of X.nc are left behind"
+    assert all(p.exists() for p in keep + [busy]), "files that are not stale temporaries of X.nc were removed"
+    assert sorted(p.name for p in tmp_path.iterdir()) == sorted(["X.nc", busy.name] + [p.name for p in keep])
+
+
+# ------------------------------------------------------------------------------------------------------
+# item 13: silently accepted today; each must be refused (or honoured and said)
+# ------------------------------------------------------------------------------------------------------
+STUDY_TP2 = ("study", "tp2", "--k", "0.1", "0.05", "--h", "0.1", "--reference", "ode", "--workers", "0",
+             "--no-progress", "-o", "st.nc")
+ITEM13 = _cases("item13", {
+    "study --h 0.1 --set h": Cli((*STUDY_TP2, "--set", "h=0.05"), ("h",)),
+    "study --k .. --set k": Cli((*STUDY_TP2, "--set", "k=0.01"), ("k",)),
+    "study --order 1 --set order": Cli((*STUDY_TP2, "--order", "1", "--set", "order=2"), ("order",)),
+    "study --scheme explicit --set scheme": Cli((*STUDY_TP2, "--scheme", "explicit", "--set", "scheme=implicit"),
+                                                  ("scheme",)),
+    "duplicate --set E": Cli(("run", "slab", *SLAB_TINY, "--set", "E=1000", "--set", "E=2000", *OUT), ("E",)),
+    "--set k beside --k": Cli(("run", "tp1", *RUN_TINY, "--set", "k=0.1", *OUT), ("k",)),
+    "--threads 0": Cli(("run", "tp1", *RUN_TINY, "--threads", "0", *OUT), ("threads",)),
+    "--threads -2": Cli(("run", "tp1", *RUN_TINY, "--threads", "-2", *OUT), ("threads",)),
+    "--workers -1": Cli(("study", "tp1", "--k", "0.1", "0.05", "--h", "0.1", "--reference", "ode", "--workers", "-1",
+                         "--no-progress", "-o", "st.nc"), ("workers",)),
+})
+
+
+@pytest.mark.parametrize("key", list(ITEM13))
+def test_silently_dropped_options_are_refused(cli, key):
+    """Today these run and exit 0 while part of the input is dropped (a study's ``--set h/k/order/scheme`` beside
+    the sweep over the same name, the first of two ``--set`` of one name, ``--set k=`` beside ``--k``) or is
+    meaningless (``--threads 0`` or negative, ``--workers -1``). Expected: exit 2 before any work, one line naming
+    the parameter or option."""
+    assert_refused(cli("item13", key), *ITEM13[key].names)
+
+
+STUDY_SET = _cases("studyset", {
+    "h": Cli(("study", "tp2", "--k", "0.1", "0.05", "--reference", "ode", "--workers", "0", "--no-progress",
+              "--set", "h=0.1", "-o", "st.nc"), ("h",)),
+    "scheme": Cli(("study", "tp2", "--k", "0.1", "0.05", "--h", "0.1", "--reference", "ode", "--workers", "0",
+                   "--no-progress", "--set", "scheme=implicit", "-o", "st.nc"), ("scheme",)),
+})
+
+
+@pytest.mark.parametrize("key, value", [("h", 0.1), ("scheme", "implicit")])
+def test_study_set_of_a_discretisation_name_is_honoured_or_refused(cli, key, value):
+    """``workbench study tp2 --set h=0.1`` (no ``--h`` sweep) drops the value today: the cases run with the
+    scene's h = 0.01. Expected: honoured (every case uses it: the study's ``h``/``scheme`` coordinate is exactly
+    that value) or refused (exit 2 before any work, one line naming it)."""
+    res = cli("studyset", key)
+    assert "Traceback" not in res.err, res.show()
+    if res.rc == 2:
+        assert_refused(res, key)
+        return
+    assert res.rc == 0, res.show()
+    got = workbench.load(res.cwd / "st.nc")[key].values.tolist()
+    assert got == [value], f"--set {key}={value} was dropped: the study ran {key} = {got}" + res.show()
+
+
+ONE_CASE = _cases("onecase", {"one-case study": Cli(("study", "tp1", "--k", "0.1", "--h", "0.1", "--workers", "0",
+                                                      "--no-progress", "-o", "st.nc"))})
+
+
+def test_one_case_study_is_not_a_success(cli):
+    """A study of one case against its own finest case (the default reference) has nothing to compare:
+    today it exits 0 and writes a result whose every error is NaN. Expected: a non-zero exit (2 if found before
+    the run, as it can be) with one clear ``error: ...`` line about the cases or the reference, no traceback and
+    no study archive with NaN errors."""
+    res = cli("onecase", "one-case study")
+    assert "Traceback" not in res.err, res.show()
+    assert res.rc not in (0, None), "a study with nothing to compare must not succeed" + res.show()
+    lines = res.lines()
+    assert len(lines) == 1 and lines[0].startswith("error: "), res.show()
+    assert "case" in lines[0] or "reference" in lines[0], res.show()
+    assert not (res.cwd / "st.nc").exists(), "a study archive of NaN errors was written" + res.show()
+
+
+SHADOW = _cases("shadow", {"./tp1 file": Cli(("run", "tp1", *RUN_TINY, "-o", "out.nc"), (), _files(
+    tp1='scene = "tp2"\ndescription = "a file that happens to be called tp1"\n'))})
+
+
+def test_file_named_like_a_builtin_scene_is_not_silent(cli):
+    """A file ``./tp1`` in the working directory silently replaces the built-in ``tp1`` today, while the archive
+    records ``scene = "tp1"``. Expected, either: refused as ambiguous (exit 2, one line naming ``tp1``), or run with
+    one of the two and said so on the terminal (a message naming ``tp1`` and the file), and the archive honest:
+    if the file was used, its ``scene`` attribute is not the bare built-in name ``tp1`` or an attribute records
+    the file's path."""
+    res = cli("shadow", "./tp1 file")
+    assert "Traceback" not in res.err, res.show()
+    if res.rc == 2:
+        assert_refused(res, "tp1")
+        return
+    assert res.rc == 0, res.show()
+    text = (res.out + "\n" + res.err).lower()
+    assert re.search(r"\bfile\b", text) and "tp1" in text, \
+        "the choice between ./tp1 and the built-in tp1 is not said" + res.show()
+    ds = workbench.load(res.cwd / "out.nc")
+    used_file = ds.attrs["base_scene"] == "tp2"
+    if used_file:
+        path = str((res.cwd / "tp1").resolve())
+        recorded = [k for k, v in ds.attrs.items() if isinstance(v, str) and (path in v or "./tp1" in v)]
+        assert ds.attrs["scene"] != "tp1" or recorded, \
+            f"the archive says scene = 'tp1' (the built-in) but the file {path} was used" + res.show()
+    else:
+        assert ds.attrs["base_scene"] == "tp1", res.show()
+
+
+@pytest.mark.parametrize("name, value, bad", [
+    ("u0", "y", "y"),
+    ("u0", "0*z", "z"),
+    ("u0", "x*y", "y"),
+    ("delta", "y", "y"),
+])
+def test_rod_expressions_refuse_y_and_z(name, value, bad):
+    """A rod is 1D: ``y`` and ``z`` in its expressions are a mistake. Today ``u0`` accepts them (evaluated as 0).
+    Expected: ParameterError naming the parameter and the variable."""
+    with pytest.raises(ParameterError) as err:
+        workbench.run("rod", h=0.5, k=0.5, progress=False, **{name: value})
+    msg = str(err.value)
+    assert name in msg and f"'{bad}'" in msg, msg
+
+
+@pytest.mark.parametrize("scene, extra", [
+    ("memory_slab", dict(h=0.5, k=0.25)),
+    ("memory_rod", dict(h=0.25, k=0.25)),
+])
+def test_kernel_without_kernel_E_is_refused(scene, extra):
+    """A relaxation ``kernel`` with ``kernel_E = 0`` (the default) has no effect: today the memory term is
+    silently dropped. Expected: ParameterError naming ``kernel_E``."""
+    with pytest.raises(ParameterError, match="kernel_E"):
+        workbench.run(scene, prony=(), kernel="exp(-t)", progress=False, **extra)
+
+
+def _claimed_snapshots(ds):
+    claimed = []
+    for text in (ds.attrs.get("snapshots", "[]"), json.dumps(json.loads(ds.attrs["parameters_json"]).get("snapshots"))):
+        value = json.loads(text) if isinstance(text, str) else text
+        claimed += [float(v) for v in np.atleast_1d(value or [])]
+    return claimed
+
+
+@pytest.mark.parametrize("scene, overrides, wanted", [
+    ("tp1", dict(h=0.1, k=0.1, snapshots=(0.123,)), 0.123),
+    ("memory_slab", dict(h=0.5), 0.25),  # the preset's own 0.25 with its k = 0.02
+])
+def test_off_grid_snapshot_is_refused_or_honest(scene, overrides, wanted):
+    """A snapshot time off the time grid is moved to the nearest grid time today (0.123 -> 0.1; memory_slab's
+    0.25 -> 0.24) while the archive still says 0.123. Expected: refused (ParameterError naming ``snapshots``), or
+    honoured (a snapshot at exactly that time), or the archive records the true time (its ``snapshots`` no longer
+    claims the requested time) or says the time was moved/interpolated. Never a moved time that the archive
+    still claims silently."""
+    try:
+        ds = workbench.run(scene, progress=False, **overrides)
+    except ParameterError as err:
+        assert "snapshots" in str(err), str(err)
+        return
+    times = ds.snapshot_time.values
+    if np.any(np.abs(times - wanted) < 1e-12):
+        return
+    claimed = _claimed_snapshots(ds)
+    if not any(abs(t - wanted) < 1e-12 for t in claimed):
+        return
+    texts = [str(v).lower() for v in list(ds.attrs.values()) + list(ds.snapshot_time.attrs.values())]
+    said = any(str(wanted) in t and any(w in t for w in ("moved", "nearest", "interpolat", "shifted")) for t in texts)
+    assert said, (f"snapshot asked at t = {wanted}, stored at {times.tolist()}, and the archive still claims "
+                  f"{claimed} without saying that the time was moved")
+
+
+def test_toml_traction_table_conflicts_with_parameters(tmp_path):
+    """A TOML file setting ``traction_top`` in ``[parameters]`` and ``top`` in ``[traction]``: today the
+    ``[traction]`` value silently wins. Expected: ParameterError naming ``traction_top``."""
+    f = tmp_path / "both.toml"
+    f.write_text('scene = "slab"\n[parameters]\ntraction_top = "(0, 1)"\n[traction]\ntop = "(0, 2)"\n')
+    with pytest.raises(ParameterError, match="traction_top"):
+        workbench.scene(f)
+
+
+@pytest.mark.parametrize("name", ["k", "h"])
+def test_study_scalar_string_is_not_read_character_by_character(name):
+    """``Study("tp1", k="0.1")`` iterates over the characters of "0.1" today and fails with a bare
+    ``ValueError`` about '.'. Expected: ParameterError naming the parameter (a sequence of numbers is needed)."""
+    from workbench.study import Study
+
+    with pytest.raises(ParameterError) as err:
+        Study("tp1", workers=0, **{name: "0.1"})
+    assert re.search(rf"(?<![A-Za-z0-9_]){name}(?![A-Za-z0-9_])", str(err.value)), str(err.value)
+
+
+@pytest.mark.parametrize("scene, wrong, right", [("slab", "e", "E"), ("slab", "NU", "nu")])
+def test_unknown_parameter_hint_ignores_case(scene, wrong, right):
+    """``e=1`` gets no hint today (the match is case-sensitive). Expected: "did you mean 'E'?"."""
+    with pytest.raises(ParameterError) as err:
+        workbench.scene(scene, **{wrong: 1})
+    assert f"did you mean {right!r}" in str(err.value), str(err.value)
+
+
+def test_misspelt_run_option_is_offered_the_option():
+    """``workbench.run("tp1", progres=False)`` is offered the scene parameter 'probes' today. Expected: a
+    ParameterError that suggests the run option 'progress'."""
+    with pytest.raises(ParameterError) as err:
+        workbench.run("tp1", h=0.5, k=0.5, progres=False)
+    msg = str(err.value)
+    assert "progres" in msg and "'progress'" in msg and "'probes'" not in msg, msg
+
+
+@pytest.mark.parametrize("scene, key, value", [
+    ("slab", "probes", "(0.5,)"),
+    ("slab", "probes", "[[0.5]]"),
+    ("slab", "probes", [(0.5, 0.05, 0.0)]),
+    ("tp1", "probes", [(0.5, 0.0)]),
+    ("tp4", "point_force_at", [(1.0,)]),
+])
+def test_point_with_wrong_number_of_coordinates(scene, key, value):
+    """A point with the wrong number of coordinates is reported today as "not inside the body" (or as a format
+    error). Expected: ParameterError naming the parameter and saying the number of coordinates is wrong."""
+    with pytest.raises(ParameterError) as err:
+        workbench.scene(scene, **{key: value})
+    msg = str(err.value)
+    assert key in msg and "coordinate" in msg and "not inside" not in msg, msg
+
+
+# ------------------------------------------------------------------------------------------------------
+# item 14: names that reach the file system are sanitised
+# ------------------------------------------------------------------------------------------------------
+VTK_DIR = "a/b/vtk"
+
+
+def _named(name_toml):
+    return _files(**{"s.toml": f'scene = "tp1"\nname = {name_toml}\n'})
+
+
+def _absolute_name(d: Path):
+    (d / "s.toml").write_text(f'scene = "tp1"\nname = {json.dumps(str(d / "elsewhere" / "x"))}\n')
+
+
+ITEM14 = _cases("item14", {
+    "name=../../x": Cli(("run", "s.toml", *RUN_TINY, "--T", "0.2", "--vtk", VTK_DIR), (), _named('"../../x"')),
+    "name=absolute path": Cli(("run", "s.toml", *RUN_TINY, "--T", "0.2", "--vtk", VTK_DIR), (), _absolute_name),
+    "name with NUL": Cli(("run", "s.toml", *RUN_TINY, "--T", "0.2", "--vtk", VTK_DIR), (), _named('"a\\u0000b"')),
+})
+
+
+@pytest.mark.parametrize("key", list(ITEM14))
+def test_toml_name_cannot_escape_the_vtk_folder(cli, key):
+    """The TOML ``name`` is the VTK file stem: today ``../../x`` or an absolute path writes outside the requested
+    folder, and a NUL ends in a traceback after the run. Expected: the name is sanitised, the run succeeds and
+    every file written (the .vtu and .pvd files) lies inside the ``--vtk`` folder (a name with a NUL may
+    instead be refused before the run: exit 2, one line naming ``name``)."""
+    res = cli("item14", key)
+    if key == "name with NUL" and res.rc == 2:  # a control character may instead be refused, naming `name`
+        assert_refused(res, "name")
+        return
+    assert "Traceback" not in res.err and res.rc == 0, res.show()
+    vtk = res.cwd / VTK_DIR
+    written = [p for p in res.new_paths() if (res.cwd / p).is_file()]
+    outside = [p for p in written if vtk not in (res.cwd / p).resolve().parents]
+    assert not outside, f"written outside {VTK_DIR}: {outside}" + res.show()
+    assert list(vtk.glob("*.pvd")) and list(vtk.glob("*.vtu")), res.show()

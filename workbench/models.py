@@ -1,0 +1,132 @@
+"""From a scene to its model: typed physics objects, built once. The only place that reads physics keys.
+
+A scene is checked values (:mod:`workbench.scenes`); a model is what those values
+mean: the body (:mod:`workbench.geometry`), the material tensors, the contact
+terms and the bonding law (Model A), or the relaxation kernel and the compliant
+layer (Model B), and the loads. Discretisation, schemes, the stability estimate
+and the condensed Newton take these objects, never the scene's physics values.
+
+Examples
+--------
+>>> import workbench
+>>> m = from_scene(workbench.scene("tp5", c_tau=2.0))
+>>> m.kind, m.terms, type(m.elastic).__name__, m.bonding.truncation
+('A', ('compliance', 'adhesion', 'glue'), 'Isotropic', 'tension')
+>>> from_scene(workbench.scene("memory_slab")).memory.kind
+'prony'
+"""
+from __future__ import annotations
+
+from dataclasses import dataclass, field
+
+from .physics import kelvin_voigt
+from .physics.contact import Contact
+from .physics.laws import LAWS
+from .physics.laws.adhesion import bonding_law
+from .physics.memory import GeneralKernel, Prony
+from .physics.unilateral import Layer
+
+
+@dataclass(frozen=True)
+class Loads:
+    """Volume force, tractions by boundary, a nodal point force, the rod's prescribed end and initial state."""
+
+    tractions: dict = field(default_factory=dict)  # boundary name -> vector Expression
+    body_force: object = None
+    point_force: object = None
+    point_force_at: tuple = ()
+    delta: object = None  # rod: u(0, t)
+    u0: object = None  # rod, Model A: the initial displacement
+
+
+@dataclass(frozen=True)
+class ModelA:
+    """Kelvin–Voigt body with normal compliance and adhesion (Chau, Fernández, Shillor, Sofonea 2003)."""
+
+    geometry: object
+    viscous: object  # A (strain rate -> stress)
+    elastic: object  # G (strain -> stress)
+    contact: Contact
+    bonding: object  # BondingLaw or None
+    beta0: float
+    loads: Loads
+    kind = "A"
+    schemes = ("explicit", "implicit")
+
+    @property
+    def terms(self) -> tuple:
+        return self.contact.names
+
+    def stress(self, u, v, eps):
+        """sigma = A eps(v) + G eps(u) as a coefficient function (``eps`` maps a field to its strain)."""
+        return self.viscous(eps(v)) + self.elastic(eps(u))
+
+
+@dataclass(frozen=True)
+class ModelB:
+    """Long-memory viscoelastic body with a unilateral, multivalued normal compliance (2013)."""
+
+    geometry: object
+    elastic: object  # A (instantaneous tensor)
+    memory: object  # Prony, GeneralKernel or None
+    layer: Layer
+    loads: Loads
+    kind = "B"
+    schemes = ("vi",)
+
+    @property
+    def terms(self) -> tuple:
+        return ("unilateral",) + (("memory",) if self.memory is not None else ())
+
+
+def _tensor(v, dim, E="E", nu="nu", voigt="elastic_tensor"):
+    if v.get(voigt):
+        return kelvin_voigt.Voigt(v[voigt], dim, voigt)
+    return kelvin_voigt.from_young(v[E], v[nu], dim, v.get("plane", "stress"))
+
+
+def _viscous(v, dim):
+    if dim == 1:
+        return kelvin_voigt.Scalar(v["b"])
+    if v.get("viscous_tensor"):
+        return kelvin_voigt.Voigt(v["viscous_tensor"], dim, "viscous_tensor")
+    return kelvin_voigt.Isotropic(v["a1"], v["a2"])
+
+
+def _loads(values, geometry) -> Loads:
+    return Loads(tractions={side: values[f"traction_{side}"] for side in geometry.loadable},
+                 body_force=values.get("body_force"), point_force=values.get("point_force"),
+                 point_force_at=tuple(values.get("point_force_at", ())), delta=values.get("delta"),
+                 u0=values.get("u0"))
+
+
+def _memory(values, dim):
+    prony = values["prony"]
+    if prony:
+        terms = []
+        for term in prony:
+            E, tau = term[0], term[-1]
+            nu = term[1] if len(term) == 3 else 0.0
+            terms.append((kelvin_voigt.from_young(E, nu, dim, values.get("plane", "stress")), tau))
+        return Prony(terms)
+    if not values["kernel"].is_zero() and values["kernel_E"] != 0:
+        tensor = kelvin_voigt.from_young(values["kernel_E"], values.get("kernel_nu", 0.0), dim,
+                                         values.get("plane", "stress"))
+        return GeneralKernel(values["kernel"], tensor)
+    return None
+
+
+def from_scene(scene):
+    """The model of a checked scene (Model A or B, as its preset declares)."""
+    from .geometry import GEOMETRIES
+
+    v = scene.values
+    geometry = GEOMETRIES[scene.geometry].from_values(v)
+    dim = geometry.dim
+    if scene.model == "B":
+        elastic = kelvin_voigt.Scalar(v["a"]) if dim == 1 else _tensor(v, dim)
+        return ModelB(geometry, elastic, _memory(v, dim), Layer(v["F"], v["c"], v["gap"]), _loads(v, geometry))
+    elastic = kelvin_voigt.Scalar(v["a"]) if dim == 1 else _tensor(v, dim)
+    terms = [t for law in LAWS if (t := law.from_values(v)) is not None]
+    return ModelA(geometry, _viscous(v, dim), elastic, Contact(terms), bonding_law(v), v["beta0"],
+                  _loads(v, geometry))
