@@ -92,3 +92,40 @@ def test_implicit_slab_with_power_compliance_matches_explicit(m):
     assert np.max(-b) > 1e-3  # penetration: the compliance acts
     assert np.max(np.abs(a - b)) < 0.02 * np.max(np.abs(b))
     assert imp.newton_iterations.max() <= 10
+
+
+def test_condensed_system_is_the_dense_schur_complement():
+    """S0^{-1} = ((M^{-1})_CC)^{-1} built with the factored M equals the inverse of the dense (M^{-1})_CC, and the
+    condensed Newton solves the full system M u + j(u) = r (checked on the assembled dense matrices)."""
+    from workbench import solvers
+    from workbench.condensation import CondensedNewton, CondensedSystem
+
+    sc = workbench.scene("slab", h=0.1, ny=2, c_nu=50.0, gamma_nu=2.0, c_tau=3.0)
+    d = discretisation.build(sc)
+    op = ContactOperator(d)
+    K = (solvers.to_scipy(d.viscous.mat) / 0.01 + solvers.to_scipy(d.elastic.mat)).toarray()
+    free = np.nonzero(np.array(d.fes.FreeDofs(), dtype=bool))[0]
+    Minv = np.zeros_like(K)
+    Minv[np.ix_(free, free)] = np.linalg.inv(K[np.ix_(free, free)])
+    M = d.viscous.mat.CreateMatrix()
+    M.AsVector().data = (1 / 0.01) * d.viscous.mat.AsVector() + d.elastic.mat.AsVector()
+    solver = solvers.factor(M, d.fes.FreeDofs(), d.u.vec)
+    cs = CondensedSystem(solver, d.ndof, op.C)
+    dense = np.linalg.inv(Minv[np.ix_(op.C, op.C)])
+    np.testing.assert_allclose(cs.S0_inv, dense, rtol=1e-9, atol=1e-9 * np.abs(dense).max())
+    # the condensed Newton reproduces the full nonlinear solve
+    rng = np.random.default_rng(4)
+    r = np.zeros(d.ndof)
+    r[free] = rng.standard_normal(free.size) * 0.5
+    z = Minv @ r
+    u_C = z[op.C].copy()
+    newton = CondensedNewton(cs, op)
+    f_C = newton.solve(u_C, z[op.C].copy(), 0.0)
+    u = z.copy()
+    f_full = np.zeros(d.ndof)
+    f_full[op.C] = f_C
+    u -= Minv @ f_full
+    assert np.abs(u[op.C] - u_C).max() <= 1e-10 * np.abs(u_C).max()
+    residual = K[np.ix_(free, free)] @ u[free] + f_full[free] - r[free]
+    assert np.abs(residual).max() <= 1e-8 * np.abs(r).max()
+    assert newton.iterations >= 1 and np.abs(f_C).max() > 1e-3  # the contact really acts

@@ -16,6 +16,7 @@ import pytest
 
 import workbench
 from workbench import references, stability
+from workbench.results import far_facet
 from workbench.stability import StepTooLarge
 
 SLAB = dict(h=0.05)
@@ -43,7 +44,7 @@ def tip(ds):
 
 def beta_far(ds):
     """beta(t) at the contact facet nearest x = 1, i.e. at (1, 0)."""
-    return ds.beta.isel(facet=int(np.argmax(ds.facet_x.values))).values
+    return far_facet(ds.beta).values
 
 
 def penetration(ds):

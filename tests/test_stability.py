@@ -14,6 +14,7 @@ import pytest
 
 import workbench
 from workbench import stability
+from workbench.results import far_facet
 from workbench.stability import StepTooLarge
 
 STIFF = dict(c_nu=100.0, gamma_nu=20.0, L=0.3)
@@ -56,7 +57,7 @@ def tip(ds):
 
 
 def beta_far(ds):
-    return ds.beta.isel(facet=int(np.argmax(ds.facet_x.values))).values
+    return far_facet(ds.beta).values
 
 
 @pytest.fixture(scope="module")

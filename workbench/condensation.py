@@ -73,20 +73,11 @@ class CondensedSystem:
     def __init__(self, solver, ndof: int, C: np.ndarray, chunk: int = 256):
         m = C.size
         S0 = np.empty((m, m))
-        rhs = np.zeros(ndof)
-        out = np.zeros(ndof)
-        if hasattr(solver, "solve_many"):
-            for start in range(0, m, chunk):
-                cols = C[start:start + chunk]
-                R = np.zeros((ndof, cols.size))
-                R[cols, np.arange(cols.size)] = 1.0
-                S0[:, start:start + cols.size] = solver.solve_many(R)[C]
-        else:
-            for j, c in enumerate(C):
-                rhs[:] = 0.0
-                rhs[c] = 1.0
-                solver.solve(rhs, out)
-                S0[:, j] = out[C]
+        for start in range(0, m, chunk):
+            cols = C[start:start + chunk]
+            R = np.zeros((ndof, cols.size))
+            R[cols, np.arange(cols.size)] = 1.0
+            S0[:, start:start + cols.size] = solver.solve_many(R)[C]
         S0 = 0.5 * (S0 + S0.T)
         self.S0_inv = la.cho_solve(la.cho_factor(S0), np.eye(m)) if m else S0
         self.S0_inv = 0.5 * (self.S0_inv + self.S0_inv.T)

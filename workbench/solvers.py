@@ -25,9 +25,6 @@ import scipy.sparse as sp
 from scipy.linalg import cho_solve_banded, cholesky_banded
 from scipy.sparse.csgraph import reverse_cuthill_mckee
 
-SOLVERS = ("auto", "banded", "sparsecholesky", "umfpack")
-
-
 def to_scipy(mat) -> sp.csr_matrix:
     """An NGSolve sparse matrix as SciPy CSR (the full matrix, also for symmetric storage)."""
     rows, cols, vals = mat.COO()
@@ -40,13 +37,14 @@ def to_scipy(mat) -> sp.csr_matrix:
 
 
 class BandedCholesky:
-    """RCM-ordered banded Cholesky of ``K[free][:, free]``."""
+    """RCM-ordered banded Cholesky of ``K[free][:, free]`` (``perm``: a precomputed RCM order of it)."""
 
     name = "banded"
 
-    def __init__(self, K: sp.spmatrix, free: np.ndarray):
+    def __init__(self, K: sp.spmatrix, free: np.ndarray, perm=None):
         Kf = K[free][:, free].tocsr()
-        perm = reverse_cuthill_mckee(Kf, symmetric_mode=True)
+        if perm is None:
+            perm = reverse_cuthill_mckee(Kf, symmetric_mode=True)
         self.order = free[perm]  # position i of the banded system is dof order[i]
         Kp = Kf[perm][:, perm].tocoo()
         upper = Kp.row <= Kp.col
@@ -82,12 +80,20 @@ class NGSolveDirect:
         self.x.data = self.inv * self.y
         out[:] = self.x.FV().NumPy()
 
+    def solve_many(self, R: np.ndarray) -> np.ndarray:
+        """Solutions for the columns of R (n x m), zero on the Dirichlet dofs."""
+        X = np.empty_like(R)
+        for j in range(R.shape[1]):
+            self.solve(R[:, j], X[:, j])
+        return X
 
-def bandwidth_after_rcm(K: sp.spmatrix, free: np.ndarray) -> int:
+
+def rcm(K: sp.spmatrix, free: np.ndarray):
+    """(RCM permutation of K[free][:, free], its bandwidth)."""
     Kf = K[free][:, free].tocsr()
     perm = reverse_cuthill_mckee(Kf, symmetric_mode=True)
     Kp = Kf[perm][:, perm].tocoo()
-    return int(np.max(np.abs(Kp.row - Kp.col))) if Kp.nnz else 0
+    return perm, (int(np.max(np.abs(Kp.row - Kp.col))) if Kp.nnz else 0)
 
 
 def factor(mat, freedofs, vector, method: str = "auto"):
@@ -95,7 +101,8 @@ def factor(mat, freedofs, vector, method: str = "auto"):
     free = np.nonzero(np.array(freedofs, dtype=bool))[0]
     if method in ("banded", "auto"):
         K = to_scipy(mat)
-        if method == "banded" or bandwidth_after_rcm(K, free) <= max(64, 0.02 * free.size):
-            return BandedCholesky(K, free)
+        perm, bandwidth = rcm(K, free)
+        if method == "banded" or bandwidth <= max(64, 0.02 * free.size):
+            return BandedCholesky(K, free, perm)
         method = "sparsecholesky"
     return NGSolveDirect(mat, freedofs, method, vector)

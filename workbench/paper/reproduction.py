@@ -36,6 +36,7 @@ import numpy as np
 
 import workbench
 from workbench.references import rod_ode, tp1_exact
+from workbench.results import far_facet
 
 from . import figures as paper_figures
 
@@ -145,7 +146,7 @@ def reference(scene):
     preset's data); any other rod scene with u0 = delta(0): the reduced ODE solved by
     Radau (:func:`workbench.references.rod_ode`).
     """
-    if scene.geometry != "rod":
+    if scene.dim != 1:
         return None
     if scene.base == "tp1" and not (set(scene.set_by_user) - {"h", "k", "snapshots"}):
         return tp1_exact()
@@ -229,9 +230,9 @@ def key_numbers(problem, ds, ref=None):
                 u_ref = np.asarray(ref(t, x=ds.probe_x.values)[0]).reshape(len(t), -1)
                 out["u_err_vs_ode"] = float(np.abs(ds.u_probe.isel(component=0).values - u_ref).max())
     else:
-        far = int(np.argmax(ds.facet_x.values))
-        b_end = ds.beta.isel(facet=far).values
-        out["facet_x"] = float(ds.facet_x[far])
+        far = far_facet(ds.beta)
+        b_end = far.values
+        out["facet_x"] = float(far.facet_x)
         out["beta_end_T"] = float(b_end[-1])
         if problem == "tp4":  # the end separates beyond L at once: beta' = -gamma L^2 beta
             v = ds.attrs
@@ -285,8 +286,7 @@ def side_studies(problem, h=None, k=None, **overrides):
         if problem == "tp3":
             out["symmetric_beta_min"] = float(ds.beta.isel(facet=-1).min())
         else:
-            far = int(np.argmax(ds.facet_x.values))
-            out["symmetric_beta_end_T"] = float(ds.beta.isel(facet=far, time=-1))
+            out["symmetric_beta_end_T"] = float(far_facet(ds.beta).isel(time=-1))
     return out
 
 

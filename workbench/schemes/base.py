@@ -107,8 +107,9 @@ class KelvinVoigtScheme(Scheme):
             return {}
         beta0 = self.d.model.beta0
         self._resolved = law.resolved(k_max, beta0)
-        self._resolution = (k_max * law.fastest_rate(beta0), 1.0 / law.fastest_rate(beta0),
-                            law.RESOLVED / law.fastest_rate(beta0))
+        rate = law.fastest_rate(beta0)
+        if not self._resolved:  # (rate > 0 here)
+            self._resolution = (k_max * rate, 1.0 / rate, law.RESOLVED / rate)
         return {"bonding_resolved": int(self._resolved)}
 
     def warnings(self) -> list:

@@ -163,7 +163,7 @@ def make(spec, scene, cases, axes):
             values = {k: v for k, v in best.values().items() if k in DISCRETISATION}
             return RunReference(cases, values, listed=False, describe="finest")
         if spec in ("ode", "exact"):
-            if scene.geometry != "rod":
+            if scene.dim != 1:
                 raise ParameterError(f"reference = {spec!r} needs a rod scene (an ODE/Volterra reference exists only "
                                      "there); use 'finest' or a finer run such as {'h': 0.005, 'k': 0.0005}")
             from ..references import rod_reference

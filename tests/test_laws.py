@@ -1,0 +1,103 @@
+"""Every contact law (workbench.physics.laws), whatever file it comes from: its two evaluations agree, its slopes are
+the derivatives of its tractions, and its declared largest slope bounds them.
+
+Each law writes its tractions once (workbench.physics.ops): as NGSolve coefficient functions (the model's definition,
+the integrand of j) and as NumPy arrays at the contact quadrature points (the time loop). For random states:
+
+* NumPy tractions = the NGSolve integrand evaluated at the same points (to round-off);
+* NumPy slopes = central finite differences of the NumPy tractions, away from the kinks;
+* |slope| <= max_slope(beta0) on states with beta <= beta0 (the explicit scheme's stability limit uses it).
+
+And the contact side (workbench.boundary): T^T (w p(T u)) equals NGSolve's assembled boundary linear form of the
+same law (to round-off), for P1 and P2 in 2D and 3D, so the quadrature points are NGSolve's own.
+"""
+import ngsolve as ngs
+import numpy as np
+import pytest
+
+import workbench
+from workbench import discretisation
+from workbench.physics.ops import NGS, NP
+from workbench.physics.laws import LAWS
+
+VALUES = dict(contact=True, adhesion=True, c_nu=7.0, m_nu=1.7, gap=0.05, gamma_nu=2.0, eps_a=0.0, L=0.3, beta0=1.0,
+              bonding_truncation="tension", c_tau=3.0, gamma_p=5.0, q_p=2.5)
+
+
+def laws():
+    out = [law.from_values(VALUES) for law in LAWS]
+    assert all(t is not None for t in out), "every law is active with VALUES"
+    return out
+
+
+@pytest.mark.parametrize("term", laws(), ids=lambda t: t.name)
+def test_numpy_and_ngsolve_evaluations_agree(term):
+    mesh = ngs.Mesh(ngs.unit_square.GenerateMesh(maxh=0.5))
+    rng = np.random.default_rng(0)
+    points = mesh(rng.uniform(0.05, 0.95, 40), rng.uniform(0.05, 0.95, 40))
+    u_nu_cf, beta_cf = 0.8 * (ngs.x - 0.5), 0.2 + 0.8 * ngs.y
+    u_tau_cf = ngs.CF((0.9 * (ngs.y - 0.4),))
+    u_nu = np.asarray(u_nu_cf(points)).ravel()
+    beta = np.asarray(beta_cf(points)).ravel()
+    u_tau = np.asarray(u_tau_cf(points)).reshape(-1, 1)
+    p_np, p_cf = term.normal(NP, u_nu, beta), term.normal(NGS, u_nu_cf, beta_cf)
+    assert (p_np is None) == (p_cf is None)
+    if p_np is not None:
+        np.testing.assert_allclose(p_np, np.asarray(p_cf(points)).ravel(), rtol=1e-13, atol=1e-15)
+    q_np, q_cf = term.tangential_traction(NP, u_tau, beta), term.tangential_traction(NGS, u_tau_cf, beta_cf)
+    assert (q_np is None) == (q_cf is None)
+    if q_np is not None:
+        np.testing.assert_allclose(q_np.ravel(), np.asarray(q_cf(points)).ravel(), rtol=1e-13, atol=1e-15)
+
+
+@pytest.mark.parametrize("term", laws(), ids=lambda t: t.name)
+def test_slopes_are_derivatives_and_bounded(term):
+    rng = np.random.default_rng(1)
+    u_nu = rng.uniform(-0.6, 0.6, 200)
+    u_tau = rng.uniform(-0.6, 0.6, (200, 2))
+    beta = rng.uniform(0.1, 1.0, 200)
+    eps = 1e-7
+    normal, tangential = term.max_slope(1.0)
+    if term.normal(NP, u_nu, beta) is not None:
+        fd = (term.normal(NP, u_nu + eps, beta) - term.normal(NP, u_nu - eps, beta)) / (2 * eps)
+        slope = np.broadcast_to(term.normal_slope(NP, u_nu, beta), u_nu.shape)
+        np.testing.assert_allclose(slope, fd, rtol=1e-5, atol=1e-6)
+        assert np.abs(slope).max() > 0
+        # the compliance with m_nu > 1 has no largest slope: its stand-in is the slope at a penetration of L
+        within = u_nu - VALUES["gap"] <= VALUES["L"] if term.name == "compliance" else np.ones_like(u_nu, bool)
+        assert np.all(np.abs(slope[within]) <= normal * (1 + 1e-12))
+    if term.tangential_traction(NP, u_tau, beta) is not None:
+        J = term.tangential_slope(NP, u_tau, beta)
+        for c in range(2):
+            e = np.zeros(2)
+            e[c] = eps
+            fd = (term.tangential_traction(NP, u_tau + e, beta) - term.tangential_traction(NP, u_tau - e, beta)) / (2 * eps)
+            np.testing.assert_allclose(J[:, :, c], fd, rtol=1e-5, atol=1e-6)
+        assert np.linalg.norm(J, 2, axis=(1, 2)).max() <= tangential * (1 + 1e-12)
+
+
+@pytest.mark.parametrize("name, order", [("slab", 1), ("slab", 2), ("block", 1), ("block", 2)])
+def test_contact_side_integrates_like_ngsolve(name, order):
+    """T^T (w p(T u, beta)) = NGSolve's LinearForm of the same integrand (its default rule), every law at once."""
+    sc = workbench.scene(name, h=0.25 if name == "block" else 0.1, order=order, **{k: v for k, v in VALUES.items()
+                                                                                   if k != "c_tau" or True})
+    d = discretisation.build(sc)
+    rng = np.random.default_rng(2)
+    u = d.u.vec.FV().NumPy()
+    u[:] = rng.uniform(-0.3, 0.3, u.size)
+    beta = d.beta.vec.FV().NumPy()
+    beta[d.beta_dofs] = rng.uniform(0.2, 1.0, d.beta_dofs.size)
+    d.contact_form.Assemble()
+    ref = d.contact_form.vec.FV().NumPy().copy()
+    side, contact = d.side, d.model.contact
+    bq = beta[d.beta_dofs][side.element]
+    mine = side.integrate(contact.normal(NP, side.u_nu(u), bq), contact.tangential_traction(NP, side.u_tau(u), bq))
+    assert np.abs(ref).max() > 1e-3
+    np.testing.assert_allclose(mine, ref, rtol=0, atol=1e-12 * np.abs(ref).max())
+    # and the bonding rate at the facet midpoints = NGSolve's form with P0 test functions
+    d.rate_form.Assemble()
+    rate_ref = d.rate_form.vec.FV().NumPy()[d.beta_dofs] / d.facet_measure
+    rs = d.rate_side
+    rate = np.empty(d.beta_dofs.size)
+    rate[rs.element] = d.model.bonding.rate(NP, beta[d.beta_dofs][rs.element], rs.u_nu(u))
+    np.testing.assert_allclose(rate, rate_ref, rtol=1e-12, atol=1e-14)
