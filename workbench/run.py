@@ -109,6 +109,7 @@ def _run(sc, model, grid, record_times, progress, limit, threads, call):
         "setup_time": setup.wall, "wall_time": clock.wall, "cpu_time": clock.cpu,
         "status": "complete" if failure is None else "incomplete",
         "failure": "" if failure is None else str(failure),
+        "failure_type": "" if failure is None else type(failure).__name__,
     } | checks
     ds = recorder.dataset(results.provenance(sc, extra, call, model.terms))
     if failure is not None:

@@ -207,7 +207,9 @@ class Study:
             ds = runs[case]
             a = ds.attrs
             row = {n: a.get(n, np.nan) for n in evaluate.COSTS}
-            row |= {"ndof": a["ndof"], "nsteps": a["nsteps"], "complete": int(a["status"] == "complete")}
+            row |= {"ndof": a["ndof"], "nsteps": a["nsteps"], "complete": int(a["status"] == "complete"),
+                    "status": a["status"] if not a.get("failure_type") or a["status"] == "refused"
+                    else f"{a['status']} ({a['failure_type']})"}
             if ref is not None and a["status"] == "complete":
                 err = ref.errors(case, self.scene_of(case, compare), ds, runs, compare,
                                  lambda c: self.scene_of(c, compare))
@@ -252,16 +254,19 @@ class Study:
 
     # -- questions ---------------------------------------------------------------------------------------
     def assert_order(self, expected: float, tol: float = 0.1, *, norm: str = "error", along: str | None = None,
-                     at_least: bool = False, max_error: float | None = None) -> None:
+                     at_least: bool = False, max_error: float | None = None, **selection) -> None:
         """Check the fitted order(s): |order - expected| <= tol (or order >= expected - tol with ``at_least``).
 
         ``along`` defaults to "h+k" for coupled sweeps, else the swept refinement axis.
         ``max_error`` caps the smallest error, so a wrong constant cannot hide behind a good slope.
+        ``selection`` picks some of the cases (e.g. ``order=2``); by default every fitted order is checked.
         """
         ds = self.dataset
         if ds is None:
             raise RuntimeError("run the study first")
         along = along or ("h+k" if self.coupled else ("h" if len(self.hs) > 1 else "k"))
+        if selection:
+            ds = ds.sel(selection)
         rates = ds.observed_order.sel(norm=norm, along=along).values.ravel()
         if not np.all(np.isfinite(rates)):
             raise AssertionError(f"no fitted order for {norm} along {along}: {rates}")

@@ -91,11 +91,12 @@ def dataset(layout: Layout, rows: dict, n_probe: int, probe_coords: dict, dim: i
     """The study Dataset from per-case ``rows`` (case -> dict of values) on ``layout``."""
     dims, shape = layout.dims, layout.shape
     names = list(NORMS) + list(COSTS) + sorted({k for r in rows.values() for k in r
-                                                if k not in NORMS + COSTS + ("ndof", "nsteps", "complete",
+                                                if k not in NORMS + COSTS + ("ndof", "nsteps", "complete", "status",
                                                                              "error_probe", "transfer")})
     arrays = {n: np.full(shape, np.nan) for n in names}
     ints = {n: np.full(shape, -1, dtype=np.int64) for n in ("ndof", "nsteps")}
     complete = np.zeros(shape, dtype=np.int8)
+    status = np.full(shape, "", dtype=object)
     ran = np.zeros(shape, dtype=np.int8)
     probe_err = np.full(shape + (n_probe,), np.nan)
     for case, row in rows.items():
@@ -107,6 +108,7 @@ def dataset(layout: Layout, rows: dict, n_probe: int, probe_coords: dict, dim: i
         for n in ints:
             ints[n][i] = row[n]
         complete[i] = row["complete"]
+        status[i] = row.get("status", "")
         if "error_probe" in row:
             probe_err[i] = row["error_probe"]
     data = {}
@@ -116,6 +118,8 @@ def dataset(layout: Layout, rows: dict, n_probe: int, probe_coords: dict, dim: i
     data["error_probe"] = (dims + ("probe",), probe_err,
                            {"units": "m", "long_name": "max over time of |u - u_ref| at the probe"})
     data["complete"] = (dims, complete, {"units": "1", "long_name": "1 if the case ran to T"})
+    data["status"] = (dims, status.astype(str), {"long_name": "complete | incomplete (the failure) | refused | "
+                                                             "'' (not part of the sweep)"})
     data["ran"] = (dims, ran, {"units": "1", "long_name": "1 if the case is part of the sweep (0: a hole of a "
                                                           "union of grids)"})
     coords = layout.coords() | {"probe": np.arange(n_probe)} | probe_coords

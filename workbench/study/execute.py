@@ -25,8 +25,15 @@ _HEADER = struct.Struct(">Q")
 
 
 def run_case(scene, case_values, record_times, snapshots, extra_attrs):
-    """Run one case (in whatever process this is); a diverged case returns its partial Dataset."""
-    from ..errors import Diverged
+    """Run one case (in whatever process this is).
+
+    A diverged case returns its partial Dataset (``status = "incomplete"``); a case the explicit scheme
+    refuses (k above its predicted k_crit) returns an empty Dataset with ``status = "refused"``: in a
+    sweep these are results, not errors.
+    """
+    import xarray as xr
+
+    from ..errors import Diverged, StepTooLarge
     from ..run import run
 
     _peak_memory_reset()  # workers are reused: the peak must be this case's
@@ -35,6 +42,10 @@ def run_case(scene, case_values, record_times, snapshots, extra_attrs):
         ds = run(sc, progress=False, record_times=record_times)
     except Diverged as err:
         ds = err.dataset
+    except StepTooLarge as err:
+        ds = xr.Dataset(attrs={"scene": sc.name, "status": "refused", "failure": str(err), "failure_type":
+                               type(err).__name__, "ndof": -1, "nsteps": -1, "wall_time": 0.0, "cpu_time": 0.0,
+                               "setup_time": 0.0})
     ds.attrs["memory_peak_mb"] = _peak_memory_mb()
     ds.attrs.update(extra_attrs)
     return ds
