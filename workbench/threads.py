@@ -3,11 +3,17 @@
 NGSolve's wheel, NumPy and SciPy each load their own OpenBLAS, each with a pool of
 threads; next to NGSolve's own task manager they oversubscribe a small machine
 (measured: one whole-process run in six to eight took 3-9x longer on two idle
-cores, the time spent spinning in a banded Cholesky of 1458 unknowns). Every
-solve in workbench is either a sparse factorisation, a back-substitution or a
-small dense solve, none of which gains from BLAS threads at these sizes, so a run
-holds every BLAS pool at one thread while it computes and restores them after
-(a notebook's own NumPy work keeps its threads).
+cores, the time spent in a banded Cholesky of 1458 unknowns). Every solve in
+workbench is either a sparse factorisation, a back-substitution or a small dense
+solve, none of which gains from BLAS threads at these sizes. Two measures:
+
+* ``import workbench`` before NumPy starts every OpenBLAS with one thread (the
+  environment variables, unless set): the only measure that removed the stalls
+  (measured with another process busy on the second core: setup 0.4-0.5 s in 8 of 8
+  runs, against 0.7-11.7 s without);
+* a run holds every loaded BLAS pool at one thread while it computes
+  (threadpoolctl) and restores them after, for processes where NumPy came first
+  (it lowers the threads but does not stop pools already started).
 
 Examples
 --------
