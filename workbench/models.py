@@ -100,7 +100,7 @@ def _loads(values, geometry) -> Loads:
                  u0=values.get("u0"))
 
 
-def _memory(values, dim):
+def _memory(values, dim, T):
     prony = values["prony"]
     if prony:
         terms = []
@@ -112,7 +112,10 @@ def _memory(values, dim):
     if not values["kernel"].is_zero() and values["kernel_E"] != 0:
         tensor = kelvin_voigt.from_young(values["kernel_E"], values.get("kernel_nu", 0.0), dim,
                                          values.get("plane", "stress"))
-        return GeneralKernel(values["kernel"], tensor)
+        kernel = GeneralKernel(values["kernel"], tensor)
+        if values.get("kernel_approximation") == "exponentials":
+            return kernel.exponential_sum(T, values["kernel_tol"])
+        return kernel
     return None
 
 
@@ -125,7 +128,7 @@ def from_scene(scene):
     dim = geometry.dim
     if scene.model == "B":
         elastic = kelvin_voigt.Scalar(v["a"]) if dim == 1 else _tensor(v, dim)
-        return ModelB(geometry, elastic, _memory(v, dim), Layer(v["F"], v["c"], v["gap"]), _loads(v, geometry))
+        return ModelB(geometry, elastic, _memory(v, dim, v["T"]), Layer(v["F"], v["c"], v["gap"]), _loads(v, geometry))
     elastic = kelvin_voigt.Scalar(v["a"]) if dim == 1 else _tensor(v, dim)
     terms = [t for law in LAWS if (t := law.from_values(v)) is not None]
     return ModelA(geometry, _viscous(v, dim), elastic, Contact(terms), bonding_law(v), v["beta0"],

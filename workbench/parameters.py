@@ -202,8 +202,13 @@ PARAMETERS: dict[str, Param] = {p.name: p for p in [
     _p("T", 1.0, "s", "final time", **_POS),
     _p("k", 0.01, "s", "time step (uniform grid; the last step is not longer than k)", **_POS),
     _p("scheme", "explicit", "", "time scheme: 'explicit' = the paper's (contact lagged, conditionally stable), "
-       "'implicit' = backward Euler with implicit contact (stable); Model B: 'vi' (one variational inequality "
+       "'implicit' = backward Euler with implicit contact (stable), 'bdf2' = second-order BDF with implicit contact; Model B: 'vi' (one variational inequality "
        "per step)", "choice", choices=tuple(SCHEME_REGISTRY)),
+    _p("rtol", 0.0, "1", "relative tolerance of error-controlled steps (implicit, bdf2, vi); 0: fixed steps of k",
+       lower=0.0, upper=0.5),
+    _p("atol", 1e-9, "m", "absolute tolerance of error-controlled steps (the displacement's)", **_POS),
+    _p("k_min", 1e-9, "s", "smallest step error control may take (below: the run stops)", **_POS),
+    _p("k_max", 0.0, "s", "largest step error control may take (0: T)", lower=0.0),
     _p("allow_unstable", False, "", "run the explicit scheme even when k exceeds its predicted stability limit",
        "flag"),
     _p("solver", "auto", "", "linear solver for the constant matrix: banded Cholesky (RCM order), NGSolve's "
@@ -244,6 +249,13 @@ PARAMETERS: dict[str, Param] = {p.name: p for p in [
     _p("kernel_E", 0.0, "Pa", "Young's modulus of the kernel tensor C (rod: its modulus); negative = relaxation"),
     _p("kernel_nu", 0.3, "1", "Poisson's ratio of the kernel tensor C", lower=-1.0, upper=0.5, lower_open=True,
        upper_open=True),
+    _p("memory_rule", "rectangle", "", "Model B: the memory integral by the left rectangle rule (first order) or the "
+       "trapezoid rule, u piecewise linear in time (second order)", "choice", choices=("rectangle", "trapezoid")),
+    _p("kernel_approximation", "quadrature", "", "Model B, a general kernel: the quadrature over all stored steps "
+       "(O(n) per step) or a sum of exponentials fitted within kernel_tol on [0, T] (O(terms) per step)", "choice",
+       choices=("quadrature", "exponentials")),
+    _p("kernel_tol", 1e-6, "1", "Model B: the error bound of the exponential-sum kernel, relative to max |b| on "
+       "[0, T]", lower=1e-12, upper=0.1),
     _p("prony", (), "Pa, 1, s", "Prony series B(t) = sum_i C(E_i, nu_i) exp(-t / tau_i): list of (E_i, nu_i, tau_i) "
        "(rod: (E_i, tau_i))", "points"),
     # loads and prescribed displacements

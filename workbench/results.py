@@ -54,6 +54,8 @@ VARIABLES = {
     "u_edges": ("m", "displacement at the edge midpoints (elements of order >= 2)"),
     "snapshot_time": ("s", "time of the field snapshot"),
     "newton_iterations": ("1", "semismooth Newton iterations in the time step (all coupling passes)"),
+    "step_size": ("s", "accepted time step ending at this time (error-controlled steps)"),
+    "error_estimate": ("1", "scaled local error estimate of the step (<= 1: within rtol, atol)"),
     "coupling_passes": ("1", "passes of the (u, beta) coupling iteration in the time step"),
     "iterations": ("1", "active-set iterations in the time step"),
     "linear_solves": ("1", "linear solves in the time step (back-substitutions and active-set solves)"),
@@ -137,8 +139,9 @@ class Recorder:
             return i < len(self.record_times) and abs(self.record_times[i] - t) <= self.tol
         return t - self.last >= self.spacing * (1 - 1e-9)
 
-    def record(self, t: float, scheme, final: bool = False) -> None:
-        """Offer the state at time t (the loop calls this after every step and after ``start``)."""
+    def record(self, t: float, scheme, final: bool = False, control=None) -> None:
+        """Offer the state at time t (the loop calls this after every step and after ``start``); ``control``:
+        scalars of the step controller (an adaptive run's step size and error estimate)."""
         self.step += 1
         d = self.disc
         if self._wanted(t, final):
@@ -151,7 +154,7 @@ class Recorder:
             if d.beta is not None:
                 self.beta.append(d.beta.vec.FV().NumPy()[d.beta_dofs].copy())
             i = len(self.times) - 1
-            for key, val in scheme.diagnostics().items():
+            for key, val in (scheme.diagnostics() | (control or {})).items():
                 self.extra.setdefault(key, []).append(val)
             for key, arr in scheme.node_values().items():
                 self.node_extra.setdefault(key, []).append(np.asarray(arr))

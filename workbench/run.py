@@ -11,11 +11,13 @@ from __future__ import annotations
 
 import warnings
 
+import numpy as np
+
 from . import discretisation, preflight, results, scenes
 from .errors import Diverged, ParameterError
 from .parameters import closest_name
 from .schemes import scheme_class
-from .schemes.stepping import FixedSteps, march, time_grid
+from .schemes.stepping import AdaptiveSteps, FixedSteps, march, time_grid
 from .threads import blas_single_threaded, task_manager
 
 #: Above this many steps only about MAX_RECORDS steps are recorded (evenly), unless asked otherwise.
@@ -86,11 +88,18 @@ def run(scene, *, progress=None, record_times=None, times=None, limit=None, thre
 
 
 def _run(sc, model, grid, record_times, progress, limit, threads, call):
-    steps = FixedSteps(grid)
+    adaptive = sc.values.get("rtol", 0) > 0
     with results.Clock() as setup:
         disc = discretisation.build(model, sc)
         scheme = scheme_class(sc["scheme"])(disc)
-        checks = scheme.preflight(steps.k_max)
+        if adaptive:
+            sync = tuple(sc["snapshots"]) + (tuple(record_times) if record_times is not None else ())
+            steps = AdaptiveSteps(sc["T"], sc["k"], rtol=sc["rtol"], atol=sc["atol"], k_min=sc["k_min"],
+                                  k_max=sc["k_max"] or sc["T"], order=scheme.order, sync=sync)
+            checks = scheme.preflight(sc["k"])
+        else:
+            steps = FixedSteps(grid)
+            checks = scheme.preflight(steps.k_max)
     for message in preflight.warnings_for(sc, model) + scheme.warnings():  # after every check passed
         warnings.warn(message, RuntimeWarning, stacklevel=3)
     recorder = results.Recorder(disc, sc["T"], sc["snapshots"], record_times, MAX_RECORDS)
@@ -103,9 +112,16 @@ def _run(sc, model, grid, record_times, progress, limit, threads, call):
         except Diverged as err:
             failure = err
     g = model.geometry
+    if adaptive:
+        taken = recorder.extra.get("step_size", [])
+        control = {"k_actual": float(np.nanmax(taken)) if len(taken) > 1 else float("nan"),
+                   "nsteps": steps.accepted_steps, "accepted_steps": steps.accepted_steps,
+                   "rejected_steps": steps.rejected_steps}
+    else:
+        control = {"k_actual": steps.k_max, "nsteps": steps.n_steps}
     extra = {
         "scheme": scheme.name, "h_max": g.h_max(), "cells": "x".join(map(str, g.cells())),
-        "k_actual": steps.k_max, "nsteps": steps.n_steps, "ndof": disc.ndof, "threads": threads or 1,
+        **control, "ndof": disc.ndof, "threads": threads or 1,
         "setup_time": setup.wall, "wall_time": clock.wall, "cpu_time": clock.cpu,
         "status": "complete" if failure is None else "incomplete",
         "failure": "" if failure is None else str(failure),

@@ -38,12 +38,13 @@ except ModuleNotFoundError:  # pragma: no cover
 
 _CONTACT = ("contact", "adhesion", "c_nu", "m_nu", "gap", "gamma_nu", "eps_a", "L", "beta0",
             "bonding_truncation") + LAW_PARAMETERS
-_TIME = ("T", "k", "scheme", "order", "h", "solver", "allow_unstable")
+_ADAPTIVE = ("rtol", "atol", "k_min", "k_max")
+_TIME = ("T", "k", "scheme", "order", "h", "solver", "allow_unstable") + _ADAPTIVE
 _OUTPUT = ("probes", "snapshots")
 _KV = ("E", "nu", "a1", "a2", "elastic_tensor", "viscous_tensor")
-_TIME_B = ("T", "k", "scheme", "order", "h", "solver")
+_TIME_B = ("T", "k", "scheme", "order", "h", "solver") + _ADAPTIVE
 _UNILATERAL = ("gap", "F", "c")
-_MEMORY = ("kernel", "kernel_E", "kernel_nu", "prony")
+_MEMORY = ("kernel", "kernel_E", "kernel_nu", "prony", "memory_rule", "kernel_approximation", "kernel_tol")
 _LOADS = ("body_force", "point_force", "point_force_at")
 
 
@@ -62,7 +63,9 @@ MODEL_PARAMETERS = {
     ("slab", "A"): _geometry_parameters("slab") + _TIME + ("plane",) + _KV + _CONTACT + ("c_tau",) + _loads("slab")
                    + _OUTPUT,
     ("block", "A"): _geometry_parameters("block") + _TIME + _KV + _CONTACT + ("c_tau",) + _loads("block") + _OUTPUT,
-    ("rod", "B"): ("length",) + _TIME_B + ("a",) + _UNILATERAL + ("kernel", "kernel_E", "prony", "delta") + _OUTPUT,
+    ("rod", "B"): ("length",) + _TIME_B + ("a",) + _UNILATERAL + ("kernel", "kernel_E", "prony", "memory_rule",
+                                                                   "kernel_approximation", "kernel_tol", "delta")
+                  + _OUTPUT,
     ("slab", "B"): _geometry_parameters("slab") + _TIME_B + ("plane", "E", "nu", "elastic_tensor") + _UNILATERAL
                    + _MEMORY + _loads("slab") + _OUTPUT,
     ("block", "B"): _geometry_parameters("block") + _TIME_B + ("E", "nu", "elastic_tensor") + _UNILATERAL + _MEMORY
@@ -285,6 +288,14 @@ def _check_consistency(name, body, v, model="A"):
                                  "be 1")
     if v["k"] > v["T"]:
         raise ParameterError(f"k = {v['k']:g} is larger than T = {v['T']:g}; allowed: 0 < k <= T")
+    if v.get("rtol", 0) > 0:
+        if v["scheme"] == "explicit":
+            raise ParameterError("rtol > 0 (error-controlled steps) applies to the implicit schemes (implicit, bdf2, "
+                                 "vi); the explicit scheme's step is bounded by its stability limit k_crit")
+        k_max = v["k_max"] or v["T"]
+        if not v["k_min"] <= v["k"] <= k_max:
+            raise ParameterError(f"k = {v['k']:g} (the first step) must lie in [k_min, k_max] = [{v['k_min']:g}, "
+                                 f"{k_max:g}]")
     steps = v["T"] / v["k"]
     if steps > MAX_STEPS:
         raise ParameterError(f"k = {v['k']:g} and T = {v['T']:g} make {steps:.3g} time steps; at most {MAX_STEPS:.0e} "

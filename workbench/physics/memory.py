@@ -25,12 +25,14 @@ import numpy as np
 
 
 class Prony:
-    """B(t) = sum_i C_i exp(-t / tau_i), given as [(C_i, tau_i)]."""
+    """B(t) = sum_i C_i exp(-t / tau_i), given as [(C_i, tau_i)]; ``fit`` says how it approximates a general
+    kernel when it does (terms, error bound)."""
 
     kind = "prony"
 
-    def __init__(self, terms):
+    def __init__(self, terms, fit=None):
         self.terms = list(terms)
+        self.fit = fit
 
     def decays(self, k: float) -> list:
         """exp(-k / tau_i): the one-step factors of the histories."""
@@ -45,7 +47,47 @@ class GeneralKernel:
     def __init__(self, shape, tensor):
         self.shape, self.tensor = shape, tensor
 
-    def weights(self, times: np.ndarray) -> np.ndarray:
-        """w_j = (t_{j+1} - t_j) b(t_n - t_j), j < n, for the grid t_0 .. t_n: the left-rectangle weights of M_n."""
+    def weights(self, times: np.ndarray, trapezoid: bool = False) -> np.ndarray:
+        """The weights w_j (j < n) of M_n = sum_j w_j u_j on the grid t_0 .. t_n.
+
+        Left rectangle: w_j = (t_{j+1} - t_j) b(t_n - t_j). Product trapezoid rule:
+        w_j = (k_{j-1} + k_j)/2 b(t_n - t_j) (w_0 = k_0/2 b(t_n)); its last weight, k_{n-1}/2 b(0),
+        multiplies u_n and is not returned (it joins the step's operator).
+        """
         t = np.asarray(times, dtype=float)
-        return np.diff(t) * np.asarray(self.shape(t=t[-1] - t[:-1]), dtype=float)
+        b = np.asarray(self.shape(t=t[-1] - t[:-1]), dtype=float)
+        k = np.diff(t)
+        if not trapezoid:
+            return k * b
+        half = 0.5 * k
+        w = half.copy()
+        w[1:] += half[:-1]
+        return w * b
+
+    def exponential_sum(self, T: float, tol: float, max_terms: int = 40) -> Prony:
+        """A Prony series within ``tol`` (relative to max |b|) of B on [0, T], so that memory costs O(terms).
+
+        Relaxation times tau_i are spread geometrically over [T / 10^5, 10 T] (m of them, m
+        doubling from 4 until the fit holds); the amplitudes c_i come from linear least
+        squares on 4000 points (half uniform in [0, T], half geometric towards 0, where a
+        fast decay lives). The error stated (``fit["error"]``) is max |b - sum c_i e^{-t/tau_i}|
+        over a denser set of 40000 points in [0, T], relative to max |b| there.
+        """
+        fit_t = np.unique(np.concatenate([np.linspace(0.0, T, 2000), T * np.geomspace(1e-7, 1.0, 2000)]))
+        check_t = np.unique(np.concatenate([np.linspace(0.0, T, 20000), T * np.geomspace(1e-8, 1.0, 20000)]))
+        b_fit = np.asarray(self.shape(t=fit_t), dtype=float) * np.ones_like(fit_t)
+        b_check = np.asarray(self.shape(t=check_t), dtype=float) * np.ones_like(check_t)
+        scale = float(np.max(np.abs(b_check))) or 1.0
+        m, best = 4, None
+        while m <= max_terms:
+            taus = T * np.geomspace(1e-5, 10.0, m)
+            basis = np.exp(-fit_t[:, None] / taus[None, :])
+            c, *_ = np.linalg.lstsq(basis, b_fit, rcond=1e-13)
+            err = float(np.max(np.abs(np.exp(-check_t[:, None] / taus[None, :]) @ c - b_check))) / scale
+            best = (taus, c, err)
+            if err <= tol:
+                break
+            m *= 2
+        taus, c, err = best
+        terms = [(self.tensor.scaled(float(ci)), float(ti)) for ci, ti in zip(c, taus)]
+        return Prony(terms, fit={"terms": len(terms), "error": err, "tol": tol, "T": float(T)})

@@ -163,6 +163,8 @@ def rod_memory(scene, n=4000):
     nan = lambda t: np.full(np.shape(t), np.nan)  # noqa: E731
     lift = lambda t: common["delta"](np.asarray(t, float)).copy()  # noqa: E731
     memory = model.memory
+    if getattr(memory, "fit", None) is not None:  # an exponential sum stands for a general kernel: use the kernel
+        memory = scene.with_(kernel_approximation="quadrature").model_of().memory
     if memory is None or memory.kind == "prony":
         terms = memory.terms if memory is not None else []
         sol = volterra.solve_prony(moduli=[C.modulus for C, _ in terms], taus=[tau for _, tau in terms], **common)

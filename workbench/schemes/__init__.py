@@ -4,6 +4,7 @@
 implicit, elastic and contact terms lagged; one back-substitution per step.
 ``implicit`` — backward Euler with the contact terms implicit (semismooth Newton
 condensed onto the contact dofs): unconditionally stable, first order.
+``bdf2`` — variable-step BDF2 with the same implicit contact, beta to second order.
 ``vi`` — Model B: one variational inequality per step (long memory, unilateral
 constraint with a compliant layer), primal-dual active set on the contact nodes.
 
@@ -21,6 +22,7 @@ from ..errors import Diverged, NewtonFailed
 REGISTRY = {
     "explicit": ("explicit_euler", "ExplicitEuler", "A"),
     "implicit": ("implicit_euler", "ImplicitEuler", "A"),
+    "bdf2": ("bdf2", "BDF2", "A"),
     "vi": ("memory_vi", "MemoryVI", "B"),
 }
 

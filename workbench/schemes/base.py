@@ -11,14 +11,31 @@ the state u, v and, for Model A, beta) from one time to the next. The time loop
     :class:`~workbench.errors.ParameterError` (e.g. the explicit scheme's
     :class:`~workbench.errors.StepTooLarge`). Returns attributes to record
     (``k_crit``, ``bonding_resolved``, ...). Warnings it has to give come after all
-    its checks, so a refused run prints only its error.
+    its checks (:meth:`Scheme.warnings`), so a refused run prints only its error.
 ``start(t0)``
     The state at t0: Model A's u0 is given (nothing to do); Model B's quasistatic
-    u(0) is the solution of the inequality at t0.
+    u(0) is the solution of the inequality at t0. Then ``accept(t0)``.
 ``step(t_prev, t_next)``
     Advance the state; any step size (the loop asks a step controller). Raises
     :class:`~workbench.errors.Diverged` / :class:`~workbench.errors.NewtonFailed`
     when it cannot.
+``accept(t)``
+    The step to t is kept: it joins the history of accepted states (the last
+    :attr:`Scheme.keep`), which multistep schemes, predictors, error estimates and
+    event detection read.
+``state() -> dict`` / ``restore(state)``
+    The full state (u, v, beta, the history, and whatever the scheme keeps: memory
+    histories, active sets), as copies; restoring it makes the scheme bitwise what it
+    was (a rejected adaptive step is redone from it; a restart continues from it).
+``local_error(rtol, atol) -> float``
+    The scaled local error of the step just taken (<= 1: acceptable), from the
+    difference to a predictor of the scheme's order; ``None`` when the history is
+    too short to tell.
+``event(state) -> float or None``
+    Where in the step just taken (0 < theta <= 1 of its length) the first kink was
+    crossed (a contact point or node changing branch, debonding starting, beta
+    reaching 0), measured against ``state`` (the state at the step's start); None
+    without one.
 ``diagnostics() -> dict``
     Scalars of the last step (or of ``start``), recorded by name (units in
     :data:`workbench.results.VARIABLES`).
@@ -32,11 +49,15 @@ the state u, v and, for Model A, beta) from one time to the next. The time loop
 ``chatter_watch``
     Whether the loop watches the contact nodes for chatter (the explicit scheme's
     unstable contact mode can bounce rather than alternate).
+``order``
+    The order in k (step controllers and error estimates use it).
 
 Registration is one line in :data:`workbench.schemes.REGISTRY` (name -> module, class,
 model); the scene's allowed values of ``scheme`` and each model's schemes come from it.
 """
 from __future__ import annotations
+
+import numpy as np
 
 from ..physics import kelvin_voigt
 
@@ -45,11 +66,15 @@ class Scheme:
     """Base class with the protocol's defaults (see the module docs)."""
 
     name = ""
+    order = 1
     chatter_watch = False
+    #: How many accepted states the history holds (enough for a quadratic predictor).
+    keep = 4
 
     def __init__(self, disc):
         self.d = disc
         self.k_last = 0.0
+        self.history = []  # accepted (t, u, beta), oldest first
 
     def preflight(self, k_max: float) -> dict:
         return {}
@@ -60,6 +85,88 @@ class Scheme:
     def step(self, t_prev: float, t_next: float) -> None:
         raise NotImplementedError
 
+    # -- the accepted history, the full state ------------------------------------------------------------
+    def _beta(self):
+        d = self.d
+        return None if d.beta is None else d.beta.vec.FV().NumPy()[d.beta_dofs]
+
+    def accept(self, t: float) -> None:
+        beta = self._beta()
+        self.history.append((float(t), self.d.u.vec.FV().NumPy().copy(), None if beta is None else beta.copy()))
+        del self.history[: -self.keep]
+
+    def state(self) -> dict:
+        d = self.d
+        beta = self._beta()
+        return {"u": d.u.vec.FV().NumPy().copy(), "v": d.v.vec.FV().NumPy().copy(),
+                "beta": None if beta is None else beta.copy(), "k_last": self.k_last,
+                "history": [(t, u.copy(), None if b is None else b.copy()) for t, u, b in self.history],
+                "extra": self._extra_state()}
+
+    def restore(self, state: dict) -> None:
+        d = self.d
+        d.u.vec.FV().NumPy()[:] = state["u"]
+        d.v.vec.FV().NumPy()[:] = state["v"]
+        if state["beta"] is not None:
+            d.beta.vec.FV().NumPy()[d.beta_dofs] = state["beta"]
+        self.k_last = state["k_last"]
+        self.history = [(t, u.copy(), None if b is None else b.copy()) for t, u, b in state["history"]]
+        self._restore_extra(state["extra"])
+
+    def _extra_state(self) -> dict:
+        """What else the scheme keeps between steps (copies)."""
+        return {}
+
+    def _restore_extra(self, extra: dict) -> None:
+        return None
+
+    # -- error control -----------------------------------------------------------------------------------
+    def predictor(self, t: float, order: int | None = None):
+        """(u, beta) at t extrapolated from the last ``order + 1`` accepted states (None if there are fewer)."""
+        p = order or self.order
+        if len(self.history) < p + 1:
+            return None
+        pts = self.history[-(p + 1):]
+        times = [s[0] for s in pts]
+        weights = []
+        for i, ti in enumerate(times):  # Lagrange weights at t
+            w = 1.0
+            for j, tj in enumerate(times):
+                if j != i:
+                    w *= (t - tj) / (ti - tj)
+            weights.append(w)
+        u = sum(w * s[1] for w, s in zip(weights, pts))
+        beta = None if pts[0][2] is None else sum(w * s[2] for w, s in zip(weights, pts))
+        return u, beta
+
+    def error_constant(self, t: float, order: int = 1) -> float:
+        """C with (local error) ~ C (u_n - predictor): the ratio of the scheme's local error term to the
+        predictor's, for the current step sizes (Taylor expansions; exact for smooth solutions). Order 1
+        (backward Euler): error k^2/2 u'', linear predictor error k (k + k_prev)/2 u''."""
+        if order != 1:
+            raise NotImplementedError(f"{self.name}: no error constant of order {order}")
+        t1, t0 = self.history[-1][0], self.history[-2][0]
+        return (t - t1) / (t - t0)
+
+    def local_error(self, rtol: float, atol: float, order: int | None = None):
+        """max over dofs (and facets) of |C (u - u_pred)| / (atol + rtol |u|_max): <= 1 is acceptable."""
+        order = order or self.order
+        t = self.history[-1][0] + self.k_last
+        pred = self.predictor(t, order)
+        if pred is None:
+            return None
+        c = self.error_constant(t, order)
+        u = self.d.u.vec.FV().NumPy()
+        err = abs(c) * np.abs(u - pred[0]).max() / (atol + rtol * np.abs(u).max())
+        beta = self._beta()
+        if beta is not None:  # beta is of order 1: relative to rtol
+            err = max(err, abs(c) * np.abs(beta - pred[1]).max() / (rtol * max(np.abs(beta).max(), 1e-3)))
+        return float(err)
+
+    def event(self, start: dict):
+        return None
+
+    # -- what is recorded ---------------------------------------------------------------------------------
     def diagnostics(self) -> dict:
         return {}
 
@@ -89,8 +196,20 @@ class Scheme:
         return kelvin_voigt.strain(field, self.d.dim)
 
 
+def first_crossing(before: np.ndarray, after: np.ndarray):
+    """The smallest theta in (0, 1] at which a linear path from ``before`` to ``after`` crosses zero (None: none).
+
+    Entries that start exactly at 0 (on the kink already) do not count.
+    """
+    crossed = (before * after < 0) | ((after == 0) & (before != 0))
+    if not crossed.any():
+        return None
+    b, a = before[crossed], after[crossed]
+    return float(np.min(b / (b - a)))
+
+
 class KelvinVoigtScheme(Scheme):
-    """Model A's shared parts: the stress A eps(v) + G eps(u - lag v), the bonding-resolution check."""
+    """Model A's shared parts: the stress A eps(v) + G eps(u - lag v), the bonding-resolution check, the kinks."""
 
     #: The elastic part of the reported stress is taken at u_n - lag * k v_n (explicit: u_{n-1}; implicit: u_n).
     lag = 0.0
@@ -119,3 +238,33 @@ class KelvinVoigtScheme(Scheme):
         return [f"k gamma_nu L^2 beta0 = {ratio:.3g}: debonding (time scale {scale:.3g} s) is faster than the step, "
                 f"so the bonding field is not resolved where |u_nu| ~ L (O(1) errors in beta possible); use k <= "
                 f"{k_ok:.2g} s for an accurate beta"]
+
+    def switching(self, u: np.ndarray, beta) -> np.ndarray:
+        """The functions whose zeros are the kinks of the contact laws and of the bonding law, for the event
+        detection: at the contact quadrature points u_nu - gap (compliance), u_nu (the pull), u_nu + L
+        (saturation) and |u_tau| - L (the glue); at the facet midpoints the debonding rate's argument and beta."""
+        from ..physics.ops import NP
+
+        d, m = self.d, self.d.model
+        if d.side is None:
+            return np.zeros(0)
+        parts = []
+        u_nu = d.side.u_nu(u)
+        for term in m.contact.terms:
+            if hasattr(term, "gap"):
+                parts.append(u_nu - term.gap)
+            if term.uses_beta and not term.tangential:
+                parts += [u_nu, u_nu + term.L]
+            if term.tangential and d.side.T_tau:
+                parts.append(np.sqrt(np.sum(d.side.u_tau(u) ** 2, axis=-1)) - term.L)
+        if m.bonding is not None and beta is not None:
+            rs = d.rate_side
+            r = m.bonding.r(NP, rs.u_nu(u))
+            b = beta[rs.element]
+            parts += [m.bonding.gamma_nu * b * r * r - m.bonding.eps_a, b]
+        return np.concatenate(parts) if parts else np.zeros(0)
+
+    def event(self, start: dict):
+        before = self.switching(start["u"], start["beta"])
+        after = self.switching(self.d.u.vec.FV().NumPy(), self._beta())
+        return first_crossing(before, after) if before.size else None

@@ -37,17 +37,29 @@ from __future__ import annotations
 
 import numpy as np
 
+from collections import OrderedDict
+
 from .. import solvers
 from ..condensation import CondensedNewton, CondensedSystem, ContactOperator
+from ..physics.ops import NP
 from .base import KelvinVoigtScheme
 
 
 class ImplicitEuler(KelvinVoigtScheme):
-    """Backward Euler, contact and adhesion implicit (module docs)."""
+    """Backward Euler, contact and adhesion implicit (module docs).
+
+    The step solves a0 K_A u_n + K_G u_n + j(beta_n, u_n, .) = F_n - K_A h_n, with
+    (a0, h_n) from :meth:`coefficients` (backward Euler: a0 = 1/k, h_n = -u_{n-1}/k;
+    :class:`~workbench.schemes.bdf2.BDF2` overrides them), so that v_n = a0 u_n + h_n.
+    The matrix a0 K_A + K_G is factored and condensed once per distinct a0 (a small cache,
+    so that an adaptive run that returns to a step size reuses it).
+    """
 
     name = "implicit"
+    order = 1
     max_passes = 2  # pass 1 with beta_{n-1}, pass 2 with the beta_n it gives (see the module docs)
     beta_tol = 1e-9  # coupling tolerance on beta (far below the O(k) error)
+    cache_size = 4
 
     def __init__(self, d):
         super().__init__(d)
@@ -59,37 +71,54 @@ class ImplicitEuler(KelvinVoigtScheme):
         self.lift = d.u.vec.CreateVector()
         self.op = ContactOperator(d) if d.side is not None else None
         self.bonding = d.model.bonding
-        self._k = None
+        self._factors = OrderedDict()
         self.iterations = self.passes = 0
-        self.u_C_prev = None
         self.resolved = True
 
     def preflight(self, k_max: float) -> dict:
         return self.bonding_check(k_max)
 
-    def _prepare(self, k: float) -> None:
-        """M = K_A / k + K_G from the assembled matrices (same sparsity), factored and condensed (once per k)."""
-        d = self.d
-        M = d.viscous.mat.CreateMatrix()
-        M.AsVector().data = (1.0 / k) * d.viscous.mat.AsVector() + d.elastic.mat.AsVector()
-        self.M = M
-        self.solver = solvers.factor(M, d.fes.FreeDofs(), d.u.vec, d.scene["solver"])
-        if self.op is not None and self.op.size:
-            self.newton = CondensedNewton(CondensedSystem(self.solver, d.ndof, self.op.C), self.op)
-        self.resolved = self.bonding is None or self.bonding.resolved(k, d.model.beta0)
-        self._k = k
+    # -- the multistep formula -------------------------------------------------------------------------------
+    def coefficients(self, k: float):
+        """(a0, None) for backward Euler: u' ~ (u_n - u_{n-1}) / k (the history term is formed in :meth:`_rhs`)."""
+        return 1.0 / k, None
 
+    def _rhs(self, k, a0, history):
+        """rhs = F_n - K_A h_n; backward Euler: F_n + K_A u_{n-1} / k."""
+        self.work.data = self.d.viscous.mat * self.d.u.vec
+        self.rhs_np += (1.0 / k) * self.work.FV().NumPy()
+
+    def _velocity(self, u, k, a0, history):
+        return (u - self.u_prev) / k
+
+    def _prepare(self, a0: float, k: float) -> None:
+        """a0 K_A + K_G from the assembled matrices (same sparsity), factored and condensed; cached by a0."""
+        d = self.d
+        key = float(a0)
+        if key in self._factors:
+            self._factors.move_to_end(key)
+        else:
+            M = d.viscous.mat.CreateMatrix()
+            M.AsVector().data = a0 * d.viscous.mat.AsVector() + d.elastic.mat.AsVector()
+            solver = solvers.factor(M, d.fes.FreeDofs(), d.u.vec, d.scene["solver"])
+            newton = CondensedNewton(CondensedSystem(solver, d.ndof, self.op.C), self.op) \
+                if self.op is not None and self.op.size else None
+            self._factors[key] = (M, solver, newton)
+            while len(self._factors) > self.cache_size:
+                self._factors.popitem(last=False)
+        self.M, self.solver, self.newton = self._factors[key]
+        self.resolved = self.bonding is None or self.bonding.resolved(k, d.model.beta0)
+
+    # -- one step ---------------------------------------------------------------------------------------------
     def step(self, t_prev: float, t_next: float) -> None:
         d = self.d
         k = t_next - t_prev
-        if self._k is None or abs(k - self._k) > 1e-12 * k:
-            self._prepare(k)
+        a0, history = self.coefficients(k)
+        self._prepare(a0, k)
         u = d.u.vec.FV().NumPy()
         self.u_prev[:] = u
-        # r = F_n + K_A u_{n-1} / k
-        d.load_vector(t_next, self.rhs)
-        self.work.data = d.viscous.mat * d.u.vec
-        self.rhs_np += (1.0 / k) * self.work.FV().NumPy()
+        d.load_vector(t_next, self.rhs)  # r = F_n - K_A h_n
+        self._rhs(k, a0, history)
         if d.moves_clamp:  # u_n = delta(t_n) at the rod end x = 0
             d.lift(t_next, self.lift.FV().NumPy())
             self.work.data = self.M * self.lift
@@ -98,16 +127,19 @@ class ImplicitEuler(KelvinVoigtScheme):
         if d.moves_clamp:
             self.z[d.dirichlet_dofs] = d.dirichlet_value(t_next)
         self.iterations = self.passes = 0
-        if self.op is not None and self.op.size:
+        if self.newton is not None:
             C = self.op.C
             # initial guess: linear extrapolation of the contact displacement (often the right active set)
-            u_C = u[C] + (k / self.k_last) * (u[C] - self.u_C_prev) if self.u_C_prev is not None else u[C].copy()
-            self.u_C_prev = u[C].copy()
+            if len(self.history) >= 2:
+                u_C_prev, k_prev = self.history[-2][1][C], self.history[-1][0] - self.history[-2][0]
+                u_C = u[C] + (k / k_prev) * (u[C] - u_C_prev)
+            else:
+                u_C = u[C].copy()
             beta = d.beta.vec.FV().NumPy() if d.beta is not None else None
             beta_old = beta[d.beta_dofs].copy() if beta is not None else None
             passes = self.max_passes
             if beta is not None and self.resolved:
-                self._update_beta(k, beta_old)  # predictor from u_{n-1}: drops beta by at most e^-0.1 here
+                self._predict_beta(k, beta_old)  # drops beta by at most e^-0.1 here
                 passes = 1
             self.newton.iterations = 0
             for self.passes in range(1, passes + 1):
@@ -129,18 +161,27 @@ class ImplicitEuler(KelvinVoigtScheme):
             u[:] = self.z
             if self.bonding is not None:
                 self._update_beta(k, d.beta.vec.FV().NumPy()[d.beta_dofs].copy())
-        d.v.vec.FV().NumPy()[:] = (u - self.u_prev) / k
+        d.v.vec.FV().NumPy()[:] = self._velocity(u, k, a0, history)
         self.k_last = k
+
+    # -- the bonding field --------------------------------------------------------------------------------------
+    def _r2(self, u):
+        """P_B[R_b(u_nu)^2] at the facets (midpoint rule), in facet order."""
+        rs = self.d.rate_side
+        r = self.bonding.r(NP, rs.u_nu(u))
+        out = np.empty(len(self.d.beta_dofs))
+        out[rs.element] = r * r
+        return out
+
+    def _predict_beta(self, k: float, beta_old) -> None:
+        """The predictor: the bonding update with u_{n-1} (the state the step starts from)."""
+        self._update_beta(k, beta_old)
 
     def _update_beta(self, k: float, beta_old) -> None:
         """beta_n from beta_{n-1} = ``beta_old`` and the current u on the contact side (r2 at the facet midpoints)."""
-        from ..physics.ops import NP
-
-        d, rs = self.d, self.d.rate_side
-        r = self.bonding.r(NP, rs.u_nu(d.u.vec.FV().NumPy()))
-        r2 = np.empty(len(beta_old))
-        r2[rs.element] = r * r
-        d.beta.vec.FV().NumPy()[d.beta_dofs] = self.bonding.exponential_step(beta_old, r2, k)
+        d = self.d
+        d.beta.vec.FV().NumPy()[d.beta_dofs] = self.bonding.exponential_step(beta_old, self._r2(d.u.vec.FV().NumPy()),
+                                                                             k)
 
     def diagnostics(self) -> dict:
         return {"newton_iterations": self.iterations, "coupling_passes": self.passes}

@@ -4,14 +4,28 @@ Per step n: find u_n in K_h = {v : v_nu <= g at the contact vertices} with
 
     (A eps(u_n), eps(v - u_n)) + (M_n, eps(v - u_n)) + j_h(v) - j_h(u_n) >= (f_n, v - u_n)
 
-where M_n = sum_{j<n} (t_{j+1} - t_j) B(t_n - t_j) eps(u_j) (left rectangle rule,
-:mod:`workbench.physics.memory`; Prony kernels by the exact one-step recursion)
-and j_h(v) = sum_i w_i psi(v_nu,i) (the layer functional with lumped boundary
-quadrature, w_i = int phi_i da).
+where M_n approximates int_0^{t_n} B(t_n - s) eps(u(s)) ds by one of two rules
+(``memory_rule``):
 
-Solver, with no parameter to tune: the elastic matrix K_A is factored once and
-condensed onto the contact vertices' normal dofs (S0 = (K_A^-1)_CC, once per
-run); a step costs one back-substitution for the contact-free displacement z,
+* ``rectangle`` (default, first order): M_n = sum_{j<n} (t_{j+1} - t_j) B(t_n - t_j) eps(u_j);
+* ``trapezoid`` (second order): u taken piecewise linear in time. A Prony term
+  C exp(-t/tau) is then integrated exactly: with x = k/tau, the history
+  H_n = e^{-x} H_{n-1} + tau ((1 - e^{-x})/x - e^{-x}) u_{n-1} + tau (1 - (1 - e^{-x})/x) u_n;
+  a general kernel b(t) C by the product trapezoid rule,
+  sum_j (k_j / 2) [b(t_n - t_j) u_j + b(t_n - t_{j+1}) u_{j+1}]. The part that multiplies
+  u_n (tau (1 - (1 - e^{-x})/x) C, resp. (k/2) b(0) C) joins the operator of step n, so
+  A + that is factored (and condensed) once per step size.
+
+Prony kernels cost O(number of terms) per step; a general kernel O(n), unless it is
+approximated by a sum of exponentials (``kernel_approximation = "exponentials"``,
+:meth:`workbench.physics.memory.GeneralKernel.exponential_sum`), which then runs as a
+Prony series. j_h(v) = sum_i w_i psi(v_nu,i) is the layer functional with lumped
+boundary quadrature (w_i = int phi_i da). u(0) solves the inequality at t = 0 (no
+memory yet).
+
+Solver, with no parameter to tune: the elastic matrix K_A (with the trapezoid rule:
+K_A plus the current step's memory part) is factored once and condensed onto the
+contact vertices' normal dofs (S0 = (K_A^-1)_CC, once per operator); a step costs one back-substitution for the contact-free displacement z,
 a primal-dual active-set iteration on the contact nodes (states separated /
 stuck / compliant / rigid, :mod:`workbench.physics.unilateral`; each iteration
 one small dense solve, exact once the states are right, warm-started from the
@@ -21,35 +35,37 @@ max |s - prox(s + rho lam / w)| and the number of linear solves.
 """
 from __future__ import annotations
 
+from collections import OrderedDict
+
 import numpy as np
 
 from .. import solvers
 from ..condensation import CondensedSystem
 from ..errors import NewtonFailed
 from ..physics import unilateral
-from .base import Scheme
+from .base import Scheme, first_crossing
 
 
 class MemoryVI(Scheme):
-    """One variational inequality per step, memory by recursion or quadrature (module docs)."""
+    """One variational inequality per step, memory by recursion or quadrature, left rectangle or trapezoid (module docs)."""
 
     name = "vi"
     max_iterations = 50
+    cache_size = 4
 
     def __init__(self, d):
         super().__init__(d)
         self.layer = d.model.layer
-        self.solver = solvers.factor(d.elastic.mat, d.fes.FreeDofs(), d.u.vec, d.scene["solver"])
+        self.trapezoid = d.scene["memory_rule"] == "trapezoid"
+        self.order = 2 if self.trapezoid else 1
         free = np.array(d.fes.FreeDofs(), dtype=bool)
         normal = d.normal_dofs
         self.active_nodes = np.nonzero(free[normal])[0]  # a clamped contact vertex is not an unknown
         self.C = normal[self.active_nodes]
         self.sign = d.geometry.normal_sign  # u_nu = sign * u_C
         self.w = d.contact_weights[self.active_nodes]
-        self.S_inv = CondensedSystem(self.solver, d.ndof, self.C).S0_inv  # (sign^2 = 1: same in s)
-        # z = s + rho lam / S_ii-scaled: the prox scaling comes from the body's own stiffness. A large factor
-        # predicts the states from the contact force (measured: factor 1 cycles on memory_slab, 10 and 100 settle)
-        self.rho = 100.0 / np.diag(self.S_inv)
+        self._operators = OrderedDict()
+        self._use(0.0)
         self.states = np.full(self.C.size, unilateral.SEPARATED)
         self.lam = np.zeros(self.C.size)
         self.z = np.zeros(d.ndof)
@@ -64,18 +80,70 @@ class MemoryVI(Scheme):
         self.stored = np.empty((64, n)) if d.memory_kind == "kernel" else None
         self.times = [0.0]
         self.diag = {}
+        self._pending = None
 
+    def preflight(self, k_max: float) -> dict:
+        """Records how a general kernel was approximated by exponentials (its terms and error bound)."""
+        fit = getattr(self.d.model.memory, "fit", None)
+        return {} if fit is None else {"kernel_terms": fit["terms"], "kernel_fit_error": fit["error"]}
+
+    # -- the operator of a step -------------------------------------------------------------------------------
+    def _implicit_weights(self, k: float) -> list:
+        """Per memory stiffness, the weight of u_n in the step's memory term (0 for the rectangle rule)."""
+        d = self.d
+        if not self.trapezoid or k == 0.0 or not d.memory:
+            return [0.0] * len(d.memory)
+        if d.memory_kind == "prony":
+            out = []
+            for _, _, tau in d.memory:
+                x = k / tau
+                out.append(tau * (1.0 - (-np.expm1(-x)) / x))
+            return out
+        return [0.5 * k * float(d.model.memory.shape(t=0.0))]
+
+    def _use(self, k: float) -> None:
+        """Factor (and condense) K_A + sum_i w_i K_Ci for this step (cached by the weights)."""
+        d = self.d
+        weights = self._implicit_weights(k)
+        key = tuple(weights)
+        if key not in self._operators:
+            M = d.elastic.mat
+            if any(weights):
+                M = d.elastic.mat.CreateMatrix()
+                vec = M.AsVector()
+                vec.data = d.elastic.mat.AsVector()
+                for wi, (K, _, _) in zip(weights, d.memory):
+                    vec.data += wi * K.mat.AsVector()
+            solver = solvers.factor(M, d.fes.FreeDofs(), d.u.vec, d.scene["solver"])
+            S_inv = CondensedSystem(solver, d.ndof, self.C).S0_inv  # (sign^2 = 1: the same in s)
+            # z = s + rho lam / S_ii-scaled: the prox scaling comes from the body's own stiffness. A large factor
+            # predicts the states from the contact force (measured: factor 1 cycles on memory_slab, 10 and 100 settle)
+            self._operators[key] = (M, solver, S_inv, 100.0 / np.diag(S_inv) if self.C.size else np.zeros(0))
+            while len(self._operators) > self.cache_size:
+                self._operators.popitem(last=False)
+        else:
+            self._operators.move_to_end(key)
+        self.M, self.solver, self.S_inv, self.rho = self._operators[key]
+        self._weights = weights
+
+    # -- memory -------------------------------------------------------------------------------------------------
     def _memory_vector(self, t_prev, t_next, out_np):
-        """out = sum_i K_Ci H_i with the histories advanced to t_next (uses u_{n-1} = current u)."""
+        """out = sum_i K_Ci H~_i: the histories advanced to t_next without their u_n part (uses u_{n-1} = u)."""
         d = self.d
         u_prev = d.u.vec.FV().NumPy()
         k = t_next - t_prev
         out_np[:] = 0.0
+        self._pending = []
         if d.memory_kind == "prony":
             for H, (K, _, tau) in zip(self.histories, d.memory):
-                decay = np.exp(-k / tau)
-                H += k * u_prev
-                H *= decay
+                x = k / tau
+                decay = np.exp(-x)
+                if self.trapezoid:  # exact for u linear on the step
+                    H *= decay
+                    H += (tau * ((-np.expm1(-x)) / x - decay)) * u_prev
+                else:
+                    H += k * u_prev
+                    H *= decay
                 self._add_matvec(K, H, out_np)
         elif d.memory_kind == "kernel":
             K = d.memory[0][0]
@@ -87,18 +155,27 @@ class MemoryVI(Scheme):
             self.stored[n] = u_prev
             self.times.append(t_next)
             t = np.asarray(self.times)
-            weights = d.model.memory.weights(t)
+            weights = d.model.memory.weights(t, self.trapezoid)
             H = weights @ self.stored[: n + 1]  # O(n) work: the whole history
             self.histories = [H]
             self._add_matvec(K, H, out_np)
+
+    def _finish_memory(self) -> None:
+        """The u_n part of the trapezoid rule joins the histories once u_n is known."""
+        u = self.d.u.vec.FV().NumPy()
+        for H, w in zip(self.histories, self._weights):
+            if w:
+                H += w * u
 
     def _add_matvec(self, K, H, out_np):
         self.tmp.FV().NumPy()[:] = H
         self.work.data = K.mat * self.tmp
         out_np += self.work.FV().NumPy()
 
+    # -- steps ----------------------------------------------------------------------------------------------------
     def start(self, t0: float) -> None:
         """u(t0) is the solution of the inequality at t0 (no memory yet): quasistatic, there is no u0."""
+        self._use(0.0)
         self._equilibrium(t0, np.zeros(self.d.ndof))
 
     def step(self, t_prev: float, t_next: float) -> None:
@@ -106,10 +183,12 @@ class MemoryVI(Scheme):
         k = t_next - t_prev
         u = d.u.vec.FV().NumPy()
         self.u_prev[:] = u
+        self._use(k)
         memory = np.zeros(d.ndof)
         if d.memory:
             self._memory_vector(t_prev, t_next, memory)
         self._equilibrium(t_next, memory)
+        self._finish_memory()
         d.v.vec.FV().NumPy()[:] = (u - self.u_prev) / k
         self.k_last = k
 
@@ -121,7 +200,7 @@ class MemoryVI(Scheme):
         self.rhs_np -= memory
         if d.moves_clamp:  # u = delta(t_n) at x = 0
             d.lift(time, self.tmp.FV().NumPy())
-            self.work.data = d.elastic.mat * self.tmp
+            self.work.data = self.M * self.tmp
             self.rhs_np -= self.work.FV().NumPy()
         self.solver.solve(self.rhs_np, self.z)
         if d.moves_clamp:
@@ -149,6 +228,35 @@ class MemoryVI(Scheme):
             "complementarity": self.layer.complementarity(self.sign * u[self.C], self.lam, self.w, self.rho * self.w)
             if self.C.size else 0.0,
         }
+
+    # -- state, events ----------------------------------------------------------------------------------------------
+    def _extra_state(self) -> dict:
+        n = len(self.times)
+        return {"histories": [H.copy() for H in self.histories], "times": list(self.times),
+                "stored": None if self.stored is None else self.stored[:n].copy(), "states": self.states.copy(),
+                "lam": self.lam.copy(), "diag": dict(self.diag)}
+
+    def _restore_extra(self, extra: dict) -> None:
+        self.histories = [H.copy() for H in extra["histories"]]
+        self.times = list(extra["times"])
+        if extra["stored"] is not None:
+            n = len(self.times)
+            if self.stored.shape[0] < n:
+                self.stored = np.empty((max(64, 2 * n), self.stored.shape[1]))
+            self.stored[:n] = extra["stored"]
+        self.states, self.lam, self.diag = extra["states"].copy(), extra["lam"].copy(), dict(extra["diag"])
+
+    def switching(self, u, lam) -> np.ndarray:
+        """Zeros where a contact node changes state: s = u_nu (separation), s - g (the rigid limit) and
+        lam / w - F (the layer's yield limit, between stuck and compliant)."""
+        s = self.sign * u[self.C]
+        return np.concatenate([s, s - self.layer.g, lam / self.w - self.layer.F])
+
+    def event(self, start: dict):
+        if not self.C.size:
+            return None
+        return first_crossing(self.switching(start["u"], start["extra"]["lam"]),
+                              self.switching(self.d.u.vec.FV().NumPy(), self.lam))
 
     def _active_set(self, s_free, time):
         """Primal-dual active set on the contact nodes, from the previous step's states.
