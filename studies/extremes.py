@@ -7,16 +7,22 @@ Writes ``<out>/extremes.nc`` (one xarray Dataset, see :func:`to_dataset`),
 Full run: a few minutes on 2 cores; ``--quick``: about one minute (fewer values,
 no k = 1e-5 runs).
 
-Every case is one :func:`workbench.run` on the slab (h = 0.05: 20 x 2 cells) or
-the rod (h = 0.1), and records: scheme, the parameter value, whether the run
-stayed bounded (``status`` complete / diverged / newton_failed / refused by the
-k_crit check / error), beta within [0, 1] and non-increasing in time at every
-facet, the max penetration max_t,nodes (u_nu - gap), Newton iterations (max,
-mean; implicit only), cost (wall time of setup + time loop), the tip
-displacement (slab: u_y at (1, 0.1); rod: u at x = 1) and beta at (1, 0) at
-the last computed time, the predicted k_crit of the explicit scheme for that
-scene, and -- where the extreme has one -- an error against a reference and a
-verdict ``ok`` against the expectation written in ``check``.
+Every sweep is a :class:`workbench.Study` (``reference=None``; the map's with a
+reference run) on the slab (h = 0.05: 20 x 2 cells) or the rod (h = 0.1), with
+one time grid per Study: a Study records only the times common to all its
+cases, so cases that differ in k or T are separate Studies. Measures and errors
+are taken on the records that a plain :func:`workbench.run` keeps (every step,
+thinned to about 2000 records for longer runs:
+``workbench.study.measures.run_records``), as in earlier archives. Every case
+records: scheme, the parameter value, whether the run stayed bounded
+(``status`` complete / diverged / newton_failed / refused by the k_crit check;
+the Study's own text in ``study_status``), beta within [0, 1] and
+non-increasing in time at every facet, the max penetration max_t,nodes (u_nu -
+gap), Newton iterations (max, mean; implicit only), cost (wall time of setup +
+time loop), the tip displacement (slab: u_y at (1, 0.1); rod: u at x = 1) and
+beta at (1, 0) at the last computed time, the predicted k_crit of the explicit
+scheme for that scene, and -- where the extreme has one -- an error against a
+reference and a verdict ``ok`` against the expectation written in ``check``.
 
 Extremes: c_nu 1 ... 1e8 (downward load; slope of log max penetration vs log
 c_nu fitted over c_nu >= 1e4); k 1e-5 ... 0.5; L down to 1e-6; gamma_nu up to
@@ -56,11 +62,14 @@ drawn over the map for each c_nu.
 from __future__ import annotations
 
 import argparse
+import contextlib
+import functools
 import json
 import math
+import os
+import tempfile
 import time
 import warnings
-from dataclasses import dataclass, field
 from pathlib import Path
 
 import numpy as np
@@ -68,125 +77,96 @@ import xarray as xr
 
 import workbench
 from workbench import references, stability
-from workbench.schemes import NewtonFailed
-from workbench.stability import StepTooLarge
+from workbench.study import Study
+from workbench.study.measures import beta_far, normal_displacement, run_records, summary, tip
 
 SLAB = dict(h=0.05)
 ROD = dict(h=0.1)
 STIFF = dict(c_nu=100.0, gamma_nu=20.0, L=0.3)
 K_EXPLICIT = 1e-3  # below STIFF's predicted k_crit = 1.38e-3 on the 20 x 2 mesh
 K_IMPLICIT = 0.01
+SCHEMES = (("implicit", K_IMPLICIT), ("explicit", K_EXPLICIT))
 UP_RAMP = "(0, 2*t)"  # tension, keeps growing (no steady state)
 SINE = "(0, -sin(3*pi*t))"  # compression until t = 1/3, then tension
 MAP_STEPS = 200
 MAP_OFF = 0.25
+#: The Study's status text -> the suite's
+STATUS = {"incomplete (Diverged)": "diverged", "incomplete (NewtonFailed)": "newton_failed"}
 
 
-def merged(*dicts, **extra):
-    """Later dicts and keywords override earlier ones."""
-    out = {}
-    for d in dicts:
-        out |= d
-    return out | extra
+@functools.lru_cache(maxsize=None)
+def _k_crit(scene_name, values):
+    return stability.critical_step(workbench.scene(scene_name, **dict(values))).k_crit
 
 
-@dataclass
-class Case:
-    """One run of the suite: which extreme, scene, scheme, parameter value and overrides."""
-
-    extreme: str
-    scene: str
-    scheme: str
-    parameter: str
-    value: float
-    overrides: dict
-    label: str = ""
-    record: dict = field(default_factory=dict)
-    ds: object = None
+def k_crit_of(scene_name, values):
+    """Predicted k_crit of the explicit scheme for this scene (cached on every value but k, T, the scheme and
+    allow_unstable, which do not enter)."""
+    return _k_crit(scene_name, tuple(sorted((n, v) for n, v in values.items()
+                                            if n not in ("k", "T", "scheme", "allow_unstable"))))
 
 
-_KCRIT_CACHE: dict = {}
+class Row:
+    """One case of the suite: its extreme, scheme, swept value, label and parameter values, its ``record``
+    (the Study's status and costs, the measures of :func:`workbench.study.measures.summary`, the extreme's
+    errors and verdict) and its run ``ds`` (read from the Study's case archive when first used)."""
+
+    def __init__(self, extreme, scene, scheme, parameter, value, label, values, record, path, ref_path=None):
+        self.extreme, self.scene, self.scheme, self.parameter = extreme, scene, scheme, parameter
+        self.value, self.label, self.values, self.record = value, label, values, record
+        self.path, self.ref_path = path, ref_path
+
+    @functools.cached_property
+    def ds(self):
+        """The run as a plain run records it (:func:`run_records`); None if it was refused."""
+        return None if self.record["status"] == "refused" else run_records(workbench.load(self.path))
 
 
-def k_crit_of(scene_name, overrides):
-    """Predicted k_crit of the explicit scheme for this scene (cached: k, T and the scheme do not enter)."""
-    key = (scene_name, json.dumps({k: v for k, v in sorted(overrides.items())
-                                   if k not in ("k", "T", "scheme", "allow_unstable")}, default=str))
-    if key not in _KCRIT_CACHE:
-        sc = workbench.scene(scene_name, **{k: v for k, v in overrides.items() if k not in ("k", "T")})
-        _KCRIT_CACHE[key] = stability.critical_step(sc).k_crit
-    return _KCRIT_CACHE[key]
+class Suite:
+    """Runs the suite's Studies, each into its own folder of case archives under ``folder``."""
 
+    def __init__(self, folder, workers=2):
+        self.folder, self.workers, self.count = Path(folder), workers, 0
 
-def normal_displacement(ds):
-    """u_nu(time, node) on the contact side: -u_y on the slab's y = 0, +u at the rod end x = 1."""
-    if "y" in ds.component.values:
-        return -ds.u_contact.sel(component="y").values
-    return ds.u_contact.sel(component="x").values
+    def study(self, extreme, scene, parameter, *, k, scheme=None, sweep=None, grids=None, value=None,
+              label=lambda case: "", measures=summary, reference=None, parallel=False, **overrides):
+        """The cases of one ``Study(scene with k and overrides, scheme=scheme, sweep=sweep, grids=grids,
+        reference=reference, measures=...)`` as rows: one time step k (and T) per Study; measures taken on the
+        records a plain run keeps (:func:`run_records`); in this process unless ``parallel`` (worker start-up
+        costs more than most of these cases). ``value(case)`` and ``label(case)`` name each case in the suite
+        (default: its value of ``parameter``, no label)."""
+        self.count += 1
+        where = self.folder / f"{self.count:02d}-{extreme.replace('/', '-')}"
+        swept = set(sweep or {}) | {n for g in grids or [] for n in g}
+        overrides = {n: v for n, v in overrides.items() if n not in swept}
+        names = set()
 
+        def measure(ds):
+            out = measures(run_records(ds))
+            names.update(out)
+            return out
 
-def tip(ds):
-    """Tip displacement series: u_y at (1, 0.1) on the slab, u at x = 1 on the rod."""
-    comp = "y" if "y" in ds.component.values else "x"
-    return ds.u_probe.isel(probe=-1).sel(component=comp).values
-
-
-def beta_far(ds):
-    """beta(t) on the contact facet nearest x = 1, i.e. at (1, 0)."""
-    return ds.beta.isel(facet=int(np.argmax(ds.facet_x.values))).values
-
-
-def summarise(ds, overrides):
-    """The per-case record of a (possibly incomplete) run."""
-    n = int(np.sum(np.isfinite(ds.u_contact.isel(node=0, component=0).values)))
-    ds = ds.isel(time=slice(0, n))
-    gap = float(ds.attrs.get("gap", 0.0))
-    u_nu = normal_displacement(ds)
-    out = dict(steps_done=int(ds.step.values[-1]) if n else 0, t_end=float(ds.time.values[-1]) if n else 0.0,
-               max_penetration=float(np.nanmax(u_nu - gap)), penetration_end=float(np.max(u_nu[-1] - gap)),
-               tip_u=float(tip(ds)[-1]),
-               wall_time=float(ds.attrs["wall_time"] + ds.attrs["setup_time"]))
-    if "beta" in ds:
-        b = ds.beta.values
-        inc = float(np.max(np.diff(b, axis=0))) if b.shape[0] > 1 else 0.0
-        beta0 = float(ds.attrs["beta0"])
-        out |= dict(beta_in_range=int(np.all((b >= 0) & (b <= 1))), beta_min=float(b.min()),
-                    beta_monotone=int(inc <= 0.0), beta_max_increase=inc,
-                    beta_exact_beta0=int(np.all(b == beta0)), beta_end=float(beta_far(ds)[-1]))
-    if "newton_iterations" in ds and n > 1:
-        it = ds.newton_iterations.values[1:]
-        out |= dict(newton_max=int(it.max()), newton_mean=float(it.mean()))
-    return out
-
-
-def execute(case: Case, **run_kw) -> Case:
-    """Run one case and fill ``case.record``; failures are recorded, never raised."""
-    ov = dict(case.overrides, scheme=case.scheme)
-    rec = dict(status="complete", message="", k=float(ov["k"]), T=float(ov["T"]),
-               k_crit=k_crit_of(case.scene, case.overrides))
-    t0 = time.perf_counter()
-    ds = None
-    with warnings.catch_warnings():
-        warnings.simplefilter("ignore", RuntimeWarning)  # the allow_unstable warning is expected here
-        try:
-            ds = workbench.run(case.scene, progress=False, **ov, **run_kw)
-        except StepTooLarge as err:
-            rec |= dict(status="refused", message=str(err))
-        except NewtonFailed as err:
-            rec |= dict(status="newton_failed", message=str(err))
-            ds = err.dataset
-        except workbench.Diverged as err:
-            rec |= dict(status="diverged", message=str(err))
-            ds = err.dataset
-        except Exception as err:  # a crash is a result here: record it with its type
-            rec |= dict(status="error", message=f"{type(err).__name__}: {err}")
-    rec["bounded"] = {"complete": 1, "refused": -1}.get(rec["status"], 0)
-    if ds is not None:
-        rec |= summarise(ds, ov)
-    else:
-        rec["wall_time"] = time.perf_counter() - t0
-    case.record, case.ds = rec, ds
-    return case
+        st = Study(workbench.scene(scene, **overrides, k=k), scheme=scheme, sweep=sweep, grids=grids,  # k with T
+                   reference=reference, measures=measure if measures else None, workers=self.workers * parallel)
+        with warnings.catch_warnings():  # the allow_unstable warning and an unresolved bonding layer are expected
+            warnings.filterwarnings("ignore", category=RuntimeWarning, module=r"workbench\.")
+            ds = st.run(where, progress=False)
+        rows = []
+        for case in st.listed:
+            at = ds.sel({d: case[d] for d in ds.status.dims})
+            status = str(at.status.values)
+            with xr.open_dataset(where / f"{case.key}.nc") as f:
+                message = f.attrs.get("failure", "")
+            values = overrides | case.values()
+            rec = dict(status=STATUS.get(status, status), study_status=status, message=message, k=float(case.k),
+                       T=float(st.scene["T"]), k_crit=k_crit_of(scene, values), study=where.name, case_key=case.key,
+                       wall_time=float(at.wall_time + at.setup_time))
+            rec["bounded"] = {"complete": 1, "refused": -1}.get(rec["status"], 0)
+            rec |= {n: int(at[n]) if n in _INT_FIELDS else float(at[n]) for n in sorted(names) if np.isfinite(at[n])}
+            ref = where / f"{st.reference.of(case).key}.nc" if reference is not None else None
+            rows.append(Row(extreme, scene, case.scheme, parameter, case[parameter] if value is None else value(case),
+                            label(case), values, rec, where / f"{case.key}.nc", ref))
+        return rows
 
 
 def verdict(case, ok, check):
@@ -197,20 +177,19 @@ def verdict(case, ok, check):
 # ---------------------------------------------------------------------------------------------- extremes
 
 
-def extreme_c_nu(quick):
+def extreme_c_nu(suite, quick):
     """c_nu from 1 to 1e8 under a downward load: penetration -> 0 like 1/c_nu (Signorini limit)."""
     exps = range(0, 9, 2) if quick else range(0, 9)
-    base = dict(SLAB, traction_top="(0, -1)", T=0.2, k=K_IMPLICIT)
-    cases = []
+    base = dict(SLAB, traction_top="(0, -1)", T=0.2)
     max_steps = 1500 if quick else 6000
-    for e in exps:
-        c = 10.0 ** e
-        ov = dict(base, c_nu=c)
-        cases.append(execute(Case("c_nu", "slab", "implicit", "c_nu", c, ov)))
-        cases.append(execute(Case("c_nu", "slab", "explicit", "c_nu", c, ov, label="k = 0.01")))
-        kc = k_crit_of("slab", ov)
-        if kc < K_IMPLICIT and ov["T"] / (0.5 * kc) <= max_steps:
-            cases.append(execute(Case("c_nu", "slab", "explicit", "c_nu", c, dict(ov, k=0.5 * kc), label="k = k_crit/2")))
+    c_values = [10.0 ** e for e in exps]
+    cases = suite.study("c_nu", "slab", "c_nu", sweep={"c_nu": c_values}, scheme=["implicit", "explicit"],
+                        k=K_IMPLICIT, label=lambda c: "k = 0.01" if c.scheme == "explicit" else "", **base)
+    for c in c_values:
+        kc = k_crit_of("slab", dict(base, c_nu=c))
+        if kc < K_IMPLICIT and base["T"] / (0.5 * kc) <= max_steps:
+            cases += suite.study("c_nu", "slab", "c_nu", sweep={"c_nu": [c]}, scheme=["explicit"], k=0.5 * kc,
+                                 label=lambda _: "k = k_crit/2", **base)
     imp = [c for c in cases if c.scheme == "implicit"]
     cs = np.array([c.value for c in imp])
     pen = np.array([c.record.get("max_penetration", np.nan) for c in imp])
@@ -235,17 +214,17 @@ def extreme_c_nu(quick):
     return cases, dict(c_nu_slope=slope)
 
 
-def extreme_k(quick):
+def extreme_k(suite, quick):
     """k from 1e-5 to 0.5: implicit bounded and converging; explicit refused above k_crit."""
     ks = [1e-4, 1e-3, 1e-2, 0.05, 0.1, 0.25, 0.5] if quick else [1e-5, 1e-4, 1e-3, 1e-2, 0.05, 0.1, 0.25, 0.5]
-    base = merged(SLAB, STIFF, traction_top=SINE, T=0.5)
+    base = dict(SLAB, **STIFF, traction_top=SINE, T=0.5)
     cases = []
     for k in ks:
-        cases.append(execute(Case("k", "slab", "implicit", "k", k, dict(base, k=k))))
-        cases.append(execute(Case("k", "slab", "explicit", "k", k, dict(base, k=k))))
-    # above k_crit with allow_unstable: must be stopped, not return garbage
-    cases.append(execute(Case("k", "slab", "explicit", "k", 1e-2, dict(base, k=1e-2, allow_unstable=True),
-                              label="allow_unstable")))
+        grids = [{"scheme": ["implicit", "explicit"]}]
+        if k == 1e-2:  # above k_crit with allow_unstable: must be stopped, not return garbage
+            grids.append({"scheme": ["explicit"], "allow_unstable": [True]})
+        cases += suite.study("k", "slab", "k", grids=grids, k=k, parallel=k <= 1e-4,
+                             label=lambda c: "allow_unstable" if c.get("allow_unstable") else "", **base)
     ref = next(c for c in cases if c.scheme == "implicit" and c.value == min(ks)).ds
     t_ref, tip_ref = ref.time.values, tip(ref)
     scale = np.abs(tip_ref).max()
@@ -267,14 +246,13 @@ def extreme_k(quick):
     return cases, {}
 
 
-def extreme_L(quick):
+def extreme_L(suite, quick):
     """Bond length L down to 1e-6: adhesion nearly switched off, beta must stay in [0, 1]."""
     Ls = [0.3, 1e-3, 1e-6] if quick else [0.3, 1e-2, 1e-4, 1e-6]
     cases = []
-    for L in Ls:
-        for scheme, k in (("implicit", K_IMPLICIT), ("explicit", K_EXPLICIT)):
-            ov = merged(SLAB, STIFF, L=L, traction_top=UP_RAMP, T=0.5, k=k)
-            cases.append(execute(Case("L", "slab", scheme, "L", L, ov)))
+    for scheme, k in SCHEMES:
+        cases += suite.study("L", "slab", "L", sweep={"L": Ls}, scheme=[scheme], k=k,
+                             **dict(SLAB, **STIFF, traction_top=UP_RAMP, T=0.5))
     for c in cases:
         r = c.record
         verdict(c, r["status"] == "complete" and r["beta_in_range"] and r["beta_monotone"],
@@ -282,35 +260,34 @@ def extreme_L(quick):
     return cases, {}
 
 
-def extreme_gamma(quick):
+def extreme_gamma(suite, quick):
     """gamma_nu up to 1e6 in three settings (see the module docstring of the findings)."""
     gs = [0.3, 1e2, 1e4, 1e6] if quick else [0.3, 20.0, 1e2, 1e4, 1e6]
     cases = []
     # (a) slab in tension, load ramp: a stiff glue (stiffness gamma beta^2) holds, u_nu ~ f / gamma
-    for g in gs:
-        ov = merged(SLAB, STIFF, gamma_nu=g, traction_top=UP_RAMP, T=0.5, k=K_IMPLICIT)
-        cases.append(execute(Case("gamma_nu/slab-tension", "slab", "implicit", "gamma_nu", g, ov)))
-        cases.append(execute(Case("gamma_nu/slab-tension", "slab", "explicit", "gamma_nu", g, dict(ov, k=K_EXPLICIT))))
     # (b) slab pressed into a soft foundation with the symmetric law (eq. 3.7 as printed): u_nu > L, so the
     #     debonding rate is gamma L^2 beta -> near-instant debonding, nothing holds it back in compression
+    for extreme, ov in (("gamma_nu/slab-tension", dict(SLAB, **STIFF, traction_top=UP_RAMP, T=0.5)),
+                        ("gamma_nu/slab-compression-symmetric",
+                         dict(SLAB, c_nu=1.0, L=0.3, bonding_truncation="symmetric", traction_top="(0, -1)", T=0.1))):
+        for scheme, k in SCHEMES:
+            cases += suite.study(extreme, "slab", "gamma_nu", sweep={"gamma_nu": gs}, scheme=[scheme], k=k, **ov)
+    # (c) rod of test problem 1 (end held 0.6 away, beyond L): reference = the reduced ODE (references.rod_ode);
+    #     explicit (and implicit) also at k = min(0.01, k_crit/2) over T = min(1, 1000 k)
+    rod = dict(ROD, T=1.0)
+    k_res = {g: min(K_IMPLICIT, 0.5 * k_crit_of("tp1", dict(rod, gamma_nu=g))) for g in gs}
+    same = [g for g in gs if k_res[g] == K_IMPLICIT]  # explicit at k = 0.01 too: with the implicit runs
+    grids = [{"scheme": ["implicit"], "gamma_nu": gs}] + ([{"scheme": ["explicit"], "gamma_nu": same}] if same else [])
+
+    def label(c):
+        return "k = 0.01" if c.scheme == "implicit" and c.k == K_IMPLICIT else "k = min(0.01, k_crit/2)"
+
+    cases += suite.study("gamma_nu/rod-tp1", "tp1", "gamma_nu", grids=grids, k=K_IMPLICIT, label=label, **rod)
     for g in gs:
-        ov = dict(SLAB, c_nu=1.0, gamma_nu=g, L=0.3, bonding_truncation="symmetric", traction_top="(0, -1)", T=0.1,
-                  k=K_IMPLICIT)
-        cases.append(execute(Case("gamma_nu/slab-compression-symmetric", "slab", "implicit", "gamma_nu", g, ov)))
-        cases.append(execute(Case("gamma_nu/slab-compression-symmetric", "slab", "explicit", "gamma_nu", g,
-                                  dict(ov, k=K_EXPLICIT))))
-    # (c) rod of test problem 1 (end held 0.6 away, beyond L): reference = the reduced ODE (references.rod_ode)
-    for g in gs:
-        ov = dict(ROD, gamma_nu=g, k=K_IMPLICIT, T=1.0)
-        cases.append(execute(Case("gamma_nu/rod-tp1", "tp1", "implicit", "gamma_nu", g, ov, label="k = 0.01")))
-        kc = k_crit_of("tp1", ov)
-        k_res = min(K_IMPLICIT, 0.5 * kc)
-        T_res = min(1.0, 1000 * k_res)
-        for scheme in ("explicit", "implicit"):
-            if scheme == "implicit" and k_res == K_IMPLICIT:
-                continue
-            cases.append(execute(Case("gamma_nu/rod-tp1", "tp1", scheme, "gamma_nu", g, dict(ov, k=k_res, T=T_res),
-                                      label="k = min(0.01, k_crit/2)")))
+        if k_res[g] < K_IMPLICIT:
+            cases += suite.study("gamma_nu/rod-tp1", "tp1", "gamma_nu", sweep={"gamma_nu": [g]},
+                                 scheme=["explicit", "implicit"], k=k_res[g], label=label,
+                                 **dict(rod, T=min(1.0, 1000 * k_res[g])))
     for c in cases:
         r = c.record
         base_ok = r["status"] in ("complete", "refused") and (r["status"] == "refused" or
@@ -330,8 +307,8 @@ def extreme_gamma(quick):
                     ok = ok and hit.size and r["t_debond"] <= 0.02
             verdict(c, ok, "beta in [0, 1], non-increasing; gamma_nu >= 1e4: beta(1, 0) < 1e-3 within 0.02 s")
         else:
-            sc = workbench.scene("tp1", **dict(c.overrides, k=r["T"] / 10))
-            _, b_ode = references.rod_ode(sc)(np.array([r["T"]]))
+            physics = {n: v for n, v in c.values.items() if n != "scheme"}
+            _, b_ode = references.rod_ode(workbench.scene("tp1", **dict(physics, k=r["T"] / 10)))(np.array([r["T"]]))
             r["beta_ode"] = float(b_ode[0])
             resolved = c.ds is None or c.ds.attrs.get("bonding_resolved", 1) == 1
             if r["status"] == "complete":
@@ -350,14 +327,13 @@ def extreme_gamma(quick):
     return cases, {}
 
 
-def extreme_eps_a(quick):
+def extreme_eps_a(suite, quick):
     """Large limit bond energy eps_a: no debonding at all, beta stays exactly beta0 = 0.7."""
     vals = [0.0, 1.0, 1e3] if quick else [0.0, 0.1, 1.0, 1e3]
     cases = []
-    for e in vals:
-        for scheme, k in (("implicit", K_IMPLICIT), ("explicit", K_EXPLICIT)):
-            ov = merged(SLAB, STIFF, eps_a=e, beta0=0.7, traction_top=UP_RAMP, T=0.5, k=k)
-            cases.append(execute(Case("eps_a", "slab", scheme, "eps_a", e, ov)))
+    for scheme, k in SCHEMES:
+        cases += suite.study("eps_a", "slab", "eps_a", sweep={"eps_a": vals}, scheme=[scheme], k=k,
+                             **dict(SLAB, **STIFF, beta0=0.7, traction_top=UP_RAMP, T=0.5))
     # gamma_nu beta0 L^2 = 1.26 bounds the debonding rate: above it nothing can debond
     for c in cases:
         r = c.record
@@ -369,36 +345,38 @@ def extreme_eps_a(quick):
     return cases, {}
 
 
-def extreme_beta0(quick):
+def extreme_beta0(suite, quick):
     """beta0 -> 1e-6: the no-adhesion limit (compared with adhesion = False)."""
     vals = [1.0, 1e-3, 1e-6] if quick else [1.0, 1e-2, 1e-4, 1e-6]
     cases = []
-    for scheme, k in (("implicit", K_IMPLICIT), ("explicit", K_EXPLICIT)):
-        ov = merged(SLAB, STIFF, traction_top=UP_RAMP, T=0.5, k=k)
-        free = execute(Case("beta0", "slab", scheme, "beta0", 0.0, dict(ov, adhesion=False), label="adhesion = False"))
-        cases.append(free)
-        for b0 in vals:
-            c = execute(Case("beta0", "slab", scheme, "beta0", b0, dict(ov, beta0=b0)))
-            r = c.record
+    for scheme, k in SCHEMES:
+        mine = suite.study("beta0", "slab", "beta0", grids=[{"adhesion": [False]}, {"beta0": vals}], scheme=[scheme],
+                           k=k, value=lambda c: c.beta0 if c.adhesion else 0.0,
+                           label=lambda c: "" if c.adhesion else "adhesion = False",
+                           **dict(SLAB, **STIFF, traction_top=UP_RAMP, T=0.5))
+        free = next(c for c in mine if not c.values["adhesion"])
+        for c in mine:
+            if c is free:
+                continue
+            r, b0 = c.record, c.value
             r["error"] = abs(r["tip_u"] - free.record["tip_u"]) / abs(free.record["tip_u"])
             ok = r["status"] == "complete" and r["beta_in_range"] and r["beta_monotone"] and r["beta_min"] <= b0
             if b0 <= 1e-6:
                 ok = ok and r["error"] < 1e-6
             verdict(c, ok, "bounded, 0 <= beta <= beta0, non-increasing; beta0 = 1e-6: tip within 1e-6 (relative) "
                     "of the no-adhesion run (error = relative tip difference)")
-            cases.append(c)
         verdict(free, free.record["status"] == "complete", "bounded")
+        cases += mine
     return cases, {}
 
 
-def extreme_nu(quick):
+def extreme_nu(suite, quick):
     """nu -> 0.4999 (plane stress: lambda* = E nu / (1 - nu^2) stays bounded, no locking expected)."""
     vals = [0.3, 0.49, 0.4995, 0.4999] if quick else [0.3, 0.45, 0.49, 0.499, 0.4995, 0.4999]
     cases = []
-    for nu in vals:
-        for scheme, k in (("implicit", K_IMPLICIT), ("explicit", K_EXPLICIT)):
-            cases.append(execute(Case("nu", "slab", scheme, "nu", nu,
-                                      merged(SLAB, STIFF, nu=nu, traction_top=SINE, T=0.5, k=k))))
+    for scheme, k in SCHEMES:
+        cases += suite.study("nu", "slab", "nu", sweep={"nu": vals}, scheme=[scheme], k=k,
+                             **dict(SLAB, **STIFF, traction_top=SINE, T=0.5))
     for c in cases:
         r = c.record
         ref = next(i for i in cases if i.scheme == c.scheme and i.value == 0.4995).record
@@ -410,36 +388,38 @@ def extreme_nu(quick):
     return cases, {}
 
 
-def extreme_viscosity(quick):
+def extreme_viscosity(suite, quick):
     """a1, a2 scaled down to a2 = 1e-6 E: nearly elastic; explicit k_crit collapses, implicit converges."""
     scales = [1.0, 1e-2, 5e-5] if quick else [1.0, 1e-2, 1e-4, 5e-5]  # a2 = 20 s: a2 / E = 0.02 s ... 1e-6
     ks = [0.05, 0.02, 0.01, 0.005] if quick else [0.05, 0.025, 0.0125, 0.00625, 0.003125]
     k_ref = 0.001
-    load = "(0, sin(pi*t))"
-    cases = []
-    for s in scales:
-        ov = merged(SLAB, STIFF, a1=30.0 * s, a2=20.0 * s, traction_top=load, T=0.5, k=K_IMPLICIT)
-        ratio = 20.0 * s / 1000.0
-        cases.append(execute(Case("viscosity", "slab", "implicit", "a2/E", ratio, ov)))
-        cases.append(execute(Case("viscosity", "slab", "explicit", "a2/E", ratio, dict(ov, k=K_EXPLICIT))))
-        if s == scales[-1]:
-            cases.append(execute(Case("viscosity", "slab", "explicit", "a2/E", ratio,
-                                      dict(ov, k=K_EXPLICIT, allow_unstable=True), label="allow_unstable")))
-            ref = execute(Case("viscosity", "slab", "implicit", "a2/E", ratio, dict(ov, k=k_ref), label="reference"))
-            sweep = [execute(Case("viscosity", "slab", "implicit", "a2/E", ratio, dict(ov, k=k), label="k sweep"))
-                     for k in ks]
-            t_ref, tip_ref = ref.ds.time.values, tip(ref.ds)
-            for c in sweep:
-                c.record["error"] = float(np.max(np.abs(tip(c.ds) - np.interp(c.ds.time.values, t_ref, tip_ref)))
-                                          / np.abs(tip_ref).max())
-            errs = [c.record["error"] for c in sweep]
-            order = float(np.polyfit(np.log(ks), np.log(errs), 1)[0])
-            for c in sweep:
-                verdict(c, c.record["status"] == "complete" and all(a > b for a, b in zip(errs, errs[1:]))
-                        and order >= 0.8, f"implicit converges as k decreases: errors decrease, observed order "
-                        f"{order:.2f} >= 0.8 (ref = implicit k = {k_ref:g})")
-            verdict(ref, ref.record["status"] == "complete", "bounded")
-            cases += [ref] + sweep
+    ov = dict(SLAB, **STIFF, traction_top="(0, sin(pi*t))", T=0.5)
+    visc = [{"a1": [30.0 * s], "a2": [20.0 * s]} for s in scales]
+    smallest = visc[-1]
+    ratio = lambda c: c.a2 / 1000.0  # noqa: E731  (a2 / E)
+    cases = suite.study("viscosity", "slab", "a2/E", grids=visc, scheme=["implicit"], k=K_IMPLICIT, value=ratio, **ov)
+    # explicit at k = 1e-3 (also with allow_unstable at the smallest viscosity) and the implicit reference k = 1e-3
+    cases += suite.study("viscosity", "slab", "a2/E", scheme=["explicit"], k=k_ref, value=ratio,
+                         grids=visc + [dict(smallest, allow_unstable=[True]), dict(smallest, scheme=["implicit"])],
+                         label=lambda c: "allow_unstable" if c.get("allow_unstable") else
+                         "reference" if c.scheme == "implicit" else "", **ov)
+    sweep = []
+    for k in ks:
+        sweep += suite.study("viscosity", "slab", "a2/E", grids=[smallest], scheme=["implicit"], k=k, value=ratio,
+                             label=lambda _: "k sweep", **ov)
+    cases += sweep
+    ref = next(c for c in cases if c.label == "reference")
+    t_ref, tip_ref = ref.ds.time.values, tip(ref.ds)
+    for c in sweep:
+        c.record["error"] = float(np.max(np.abs(tip(c.ds) - np.interp(c.ds.time.values, t_ref, tip_ref)))
+                                  / np.abs(tip_ref).max())
+    errs = [c.record["error"] for c in sweep]
+    order = float(np.polyfit(np.log(ks), np.log(errs), 1)[0])
+    for c in sweep:
+        verdict(c, c.record["status"] == "complete" and all(a > b for a, b in zip(errs, errs[1:]))
+                and order >= 0.8, f"implicit converges as k decreases: errors decrease, observed order "
+                f"{order:.2f} >= 0.8 (ref = implicit k = {k_ref:g})")
+    verdict(ref, ref.record["status"] == "complete", "bounded")
     kc1 = next(c for c in cases if c.value == 0.02).record["k_crit"]
     for c in cases:
         r = c.record
@@ -457,12 +437,12 @@ def extreme_viscosity(quick):
     return cases, dict(viscosity_order=order)
 
 
-def extreme_long_T(quick):
+def extreme_long_T(suite, quick):
     """T long enough for complete debonding at (1, 0): beta -> 0, stays there, never negative."""
-    ov = merged(SLAB, STIFF, traction_top="(0, 0.5 + 0.05*t)", T=20.0, k=0.02)
-    cases = [execute(Case("long_T", "slab", "implicit", "T", 20.0, ov))]
-    if not quick:
-        cases.append(execute(Case("long_T", "slab", "explicit", "T", 20.0, dict(ov, k=K_EXPLICIT))))
+    ov = dict(SLAB, **STIFF, traction_top="(0, 0.5 + 0.05*t)", T=20.0)
+    cases = []
+    for scheme, k in (("implicit", 0.02),) + ((("explicit", K_EXPLICIT),) if not quick else ()):
+        cases += suite.study("long_T", "slab", "T", scheme=[scheme], k=k, value=lambda _: 20.0, **ov)
     for c in cases:
         r = c.record
         ok = r["status"] == "complete" and r["beta_in_range"] and r["beta_monotone"]
@@ -477,18 +457,17 @@ def extreme_long_T(quick):
     return cases, {}
 
 
-def false_alarm():
+def false_alarm(suite):
     """Converged runs at a steady state stopped by the oscillation watch (a package failure, see ``failures``).
 
     Constant load (0, -1), c_nu = 1 (predicted k_crit = 0.0455): the explicit scheme at k = 0.04 < k_crit and the
     implicit scheme at one k that showed it (round-off decides, so neighbouring k may pass).
     """
     base = dict(SLAB, c_nu=1.0, traction_top="(0, -1)")
-    cases = [Case("false_alarm", "slab", "explicit", "k", 0.04, dict(base, k=0.04, T=8.0)),
-             Case("false_alarm", "slab", "implicit", "k", 0.009280408877267919,
-                  dict(base, k=0.009280408877267919, T=9.280408877267919))]
+    cases = []
+    for scheme, k, T in (("explicit", 0.04, 8.0), ("implicit", 0.009280408877267919, 9.280408877267919)):
+        cases += suite.study("false_alarm", "slab", "k", scheme=[scheme], k=k, value=lambda c: c.k, **base, T=T)
     for c in cases:
-        execute(c)
         r = c.record
         if c.ds is not None:
             u_nu = normal_displacement(c.ds)
@@ -503,26 +482,38 @@ def false_alarm():
 # ---------------------------------------------------------------------------------------------- stability map
 
 
-def stability_map(quick):
-    """Explicit scheme on a (k, c_nu) grid, run with allow_unstable = True and classified (module docstring)."""
+def stability_map(suite, quick):
+    """Explicit scheme on a (k, c_nu) grid, run with allow_unstable = True and classified (module docstring).
+
+    One Study per k (its T = MAP_STEPS k), over the c_nu that have that k, with the implicit run at k / 2 as its
+    reference run (recorded at the explicit run's times).
+    """
     c_values = [1.0, 1e2, 1e4] if quick else [1.0, 10.0, 1e2, 1e3, 1e4]
     grid = 10.0 ** np.arange(-6, -0.4, 1.0 if quick else 0.5)
+    k_crit, ks = {}, {}
+    for c in c_values:
+        kc = k_crit[c] = k_crit_of("slab", dict(SLAB, c_nu=c))
+        near = [0.8 * kc, 1.25 * kc] if quick else [0.7 * kc, 0.9 * kc, 1.1 * kc, 1.4 * kc]
+        ks[c] = sorted(set(grid.tolist()) | set(near))
+    runs = {}
+    for k in sorted({k for c in c_values for k in ks[c]}):
+        T = MAP_STEPS * k
+        for row in suite.study("map", "slab", "k", sweep={"c_nu": [c for c in c_values if k in ks[c]]},
+                               scheme=["explicit"], k=k, measures=None, allow_unstable=True,
+                               reference={"scheme": "implicit", "k": k / 2, "allow_unstable": False},
+                               traction_top=f"(0, -(1 + 0.5*sin(2*pi*t/{T!r})))", T=T, **SLAB):
+            runs[row.values["c_nu"], k] = row
     cells = []
     for c in c_values:
-        kc = k_crit_of("slab", dict(SLAB, c_nu=c))
-        near = [0.8 * kc, 1.25 * kc] if quick else [0.7 * kc, 0.9 * kc, 1.1 * kc, 1.4 * kc]
-        for k in sorted(set(grid.tolist()) | set(near)):
-            T = MAP_STEPS * k
-            load = f"(0, -(1 + 0.5*sin(2*pi*t/{T!r})))"
-            ov = dict(SLAB, c_nu=c, traction_top=load, T=T)
-            exp = execute(Case("map", "slab", "explicit", "k", k, dict(ov, k=k, allow_unstable=True)))
-            ref = execute(Case("map", "slab", "implicit", "k", k, dict(ov, k=k / 2)))
-            rec = dict(c_nu=c, k=k, k_crit=kc, status=exp.record["status"], message=exp.record["message"],
-                       wall_time=exp.record["wall_time"] + ref.record["wall_time"], error=math.nan,
-                       ref_status=ref.record["status"])
-            if exp.ds is not None and ref.ds is not None:
+        for k in ks[c]:
+            exp = runs[c, k]
+            ref = workbench.load(exp.ref_path)
+            rec = dict(c_nu=c, k=k, k_crit=k_crit[c], status=exp.record["status"], message=exp.record["message"],
+                       wall_time=exp.record["wall_time"] + ref.attrs["wall_time"] + ref.attrs["setup_time"],
+                       error=math.nan, ref_status=STATUS.get(ref.attrs["status"], ref.attrs["status"]))
+            if exp.ds is not None:
                 a = normal_displacement(exp.ds)
-                b = normal_displacement(ref.ds)[::2][: a.shape[0]]
+                b = normal_displacement(ref)[: a.shape[0]]  # recorded at the explicit run's times t = 0, k, 2k, ...
                 n = int(np.sum(np.isfinite(a[:, 0])))
                 late = slice(MAP_STEPS // 2, n) if n > MAP_STEPS // 2 else slice(0, n)
                 with np.errstate(invalid="ignore"):
@@ -551,7 +542,7 @@ _FLOAT_FIELDS = ("value", "k", "T", "k_crit", "max_penetration", "penetration_en
                  "velocity_at_stop", "velocity_peak")
 _INT_FIELDS = ("bounded", "beta_in_range", "beta_monotone", "beta_exact_beta0", "newton_max", "steps_done", "ok",
                "beta_exact_zero")
-_STR_FIELDS = ("status", "message", "check")
+_STR_FIELDS = ("status", "message", "check", "study_status", "study", "case_key")
 _META = {
     "extreme": ("", "which extreme the case belongs to"),
     "scene": ("", "scene name"), "scheme": ("", "time scheme"), "parameter": ("", "the swept parameter"),
@@ -576,8 +567,11 @@ _META = {
     "beta_exact_beta0": ("1", "beta == beta0 exactly everywhere (-1: no beta)"),
     "steps_done": ("1", "time steps computed"), "ok": ("1", "the expectation in check holds"),
     "beta_exact_zero": ("1", "beta(1, 0) reached exactly 0"),
-    "status": ("", "complete | diverged | newton_failed | refused | error"), "message": ("", "failure message"),
+    "status": ("", "complete | diverged | newton_failed | refused"), "message": ("", "failure message"),
     "check": ("", "the expectation this case is judged by"),
+    "study_status": ("", "the Study's status: complete | incomplete (the failure) | refused"),
+    "study": ("", "the Study (folder of case archives) the case belongs to"),
+    "case_key": ("", "the case's key (file stem) in its Study"),
 }
 
 
@@ -623,6 +617,9 @@ def to_dataset(cases, cells, curve, bounds, summary, quick):
                                      status=c.record["status"], message=c.record["message"], check=c.record["check"])
                                 for i, c in enumerate(cases) if not c.record.get("ok", 1)]),
         "workbench_version": workbench.__version__,
+        "cases": "every case is a case of a workbench.Study with one time grid (k, T); measures "
+                 "(workbench.study.measures.summary) and errors on the records a plain workbench.run keeps "
+                 "(workbench.study.measures.run_records)",
     })
     return ds
 
@@ -761,28 +758,35 @@ def main(argv=None):
     p = argparse.ArgumentParser(description=__doc__.splitlines()[0])
     p.add_argument("--quick", action="store_true", help="fewer values, about one minute")
     p.add_argument("--out", default="data/extremes", help="output folder (default data/extremes)")
+    p.add_argument("--cases", help="folder for the Studies' case archives, kept (default: a temporary folder); a "
+                                   "rerun with the same folder recomputes only the missing cases")
+    p.add_argument("--workers", type=int, default=2, help="worker subprocesses per Study (default 2; 0: in process)")
     args = p.parse_args(argv)
     out = Path(args.out)
     out.mkdir(parents=True, exist_ok=True)
+    # the workers' runs warn of what is expected here (allow_unstable, unresolved bonding layers, P1 on the slab)
+    os.environ["PYTHONWARNINGS"] = ",".join(filter(None, [os.environ.get("PYTHONWARNINGS"), "ignore::RuntimeWarning"]))
     t0 = time.perf_counter()
-    cases, summary = [], {}
-    for fn in (extreme_c_nu, extreme_k, extreme_L, extreme_gamma, extreme_eps_a, extreme_beta0, extreme_nu,
-               extreme_viscosity, extreme_long_T):
-        t1 = time.perf_counter()
-        c, s = fn(args.quick)
+    with contextlib.nullcontext(args.cases) if args.cases else tempfile.TemporaryDirectory() as folder:
+        suite = Suite(folder, args.workers)
+        cases, summary = [], {}
+        for fn in (extreme_c_nu, extreme_k, extreme_L, extreme_gamma, extreme_eps_a, extreme_beta0, extreme_nu,
+                   extreme_viscosity, extreme_long_T):
+            t1 = time.perf_counter()
+            c, s = fn(suite, args.quick)
+            cases += c
+            summary |= s
+            print(f"{fn.__name__:20s} {len(c):3d} cases  {time.perf_counter() - t1:6.1f} s", flush=True)
+        c, _ = false_alarm(suite)
         cases += c
-        summary |= s
-        print(f"{fn.__name__:20s} {len(c):3d} cases  {time.perf_counter() - t1:6.1f} s", flush=True)
-    c, _ = false_alarm()
-    cases += c
-    t1 = time.perf_counter()
-    cells, curve, bounds = stability_map(args.quick)
-    print(f"{'stability_map':20s} {len(cells):3d} cells  {time.perf_counter() - t1:6.1f} s", flush=True)
-    implicit = [c.record["newton_max"] for c in cases if "newton_max" in c.record]
-    summary |= dict(newton_max_overall=max(implicit), runtime=time.perf_counter() - t0)
-    ds = to_dataset(cases, cells, curve, bounds, summary, args.quick)
-    workbench.write(ds, out / "extremes.nc")
-    plot(cases, cells, curve, summary, out)
+        t1 = time.perf_counter()
+        cells, curve, bounds = stability_map(suite, args.quick)
+        print(f"{'stability_map':20s} {len(cells):3d} cells  {time.perf_counter() - t1:6.1f} s", flush=True)
+        implicit = [c.record["newton_max"] for c in cases if "newton_max" in c.record]
+        summary |= dict(newton_max_overall=max(implicit), runtime=time.perf_counter() - t0)
+        ds = to_dataset(cases, cells, curve, bounds, summary, args.quick)
+        workbench.write(ds, out / "extremes.nc")
+        plot(cases, cells, curve, summary, out)
     print(table(cases))
     print("\nstability map (explicit): c_nu, last stable k, first unstable k, predicted k_crit, observed/predicted")
     for c, (good, bad, kc) in bounds.items():

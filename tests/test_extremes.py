@@ -16,8 +16,8 @@ import pytest
 
 import workbench
 from workbench import references, stability
-from workbench.results import far_facet
 from workbench.stability import StepTooLarge
+from workbench.study.measures import beta_far, penetration, tip
 
 SLAB = dict(h=0.05)
 STIFF = dict(h=0.05, c_nu=100.0, gamma_nu=20.0, L=0.3)
@@ -35,21 +35,6 @@ def _run(scene, frozen):
 def run(scene="slab", **kw):
     """A cached run (several tests share runs; results are read-only here)."""
     return _run(scene, json.dumps(kw, sort_keys=True))
-
-
-def tip(ds):
-    comp = "y" if "y" in ds.component.values else "x"
-    return ds.u_probe.isel(probe=-1).sel(component=comp).values
-
-
-def beta_far(ds):
-    """beta(t) at the contact facet nearest x = 1, i.e. at (1, 0)."""
-    return far_facet(ds.beta).values
-
-
-def penetration(ds):
-    """max over time and contact nodes of u_nu - gap, with u_nu = -u_y on the slab's contact side y = 0."""
-    return float(np.max(-ds.u_contact.sel(component="y").values - ds.attrs["gap"]))
 
 
 def assert_beta_admissible(ds):
