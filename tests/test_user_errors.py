@@ -701,3 +701,16 @@ def test_toml_name_cannot_escape_the_vtk_folder(cli, key):
     outside = [p for p in written if vtk not in (res.cwd / p).resolve().parents]
     assert not outside, f"written outside {VTK_DIR}: {outside}" + res.show()
     assert list(vtk.glob("*.pvd")) and list(vtk.glob("*.vtu")), res.show()
+
+
+def test_run_stays_the_function_after_the_study_imports_the_runner():
+    """Importing the module that holds ``run`` (as the Study does) must not replace ``workbench.run``."""
+    import subprocess
+    import sys
+
+    code = ("import workbench.study, workbench.runner, workbench\n"
+            "ds = workbench.run('tp1', h=0.25, k=0.25, progress=False)\n"
+            "print(type(workbench.run).__name__, ds.attrs['status'])")
+    out = subprocess.run([sys.executable, "-c", code], capture_output=True, text=True, timeout=300)
+    assert out.returncode == 0, out.stderr
+    assert out.stdout.split() == ["function", "complete"]

@@ -27,7 +27,7 @@ from .errors import Diverged, ParameterError  # noqa: E402
 __version__ = "0.1.0"
 __all__ = ["run", "load", "write", "scene", "Scene", "Study", "ParameterError", "Diverged"]
 
-_LAZY = {"run": "run", "load": "results", "write": "results", "scene": "scenes", "Scene": "scenes",
+_LAZY = {"run": "runner", "load": "results", "write": "results", "scene": "scenes", "Scene": "scenes",
          "Study": "study"}
 
 

@@ -149,7 +149,7 @@ def _status_line(ds) -> str:
 
 def cmd_run(args) -> int:
     from .errors import Diverged
-    from .run import run
+    from .runner import run
 
     _check_outputs(args)
     overrides = _overrides(args)

@@ -113,17 +113,22 @@ class Recorder:
     The time loop offers every step's end time (:meth:`record`); the recorder keeps
     t0, T, the ``record_times`` if given, else every step thinned to at most about
     ``max_records`` records (one whenever a (T / max_records)-long stretch has passed,
-    whatever the step sizes), and whole fields at the ``snapshots`` times (which the
+    whatever the step sizes; with ``every_step``, for error-controlled runs whose short
+    steps are where things happen: every step, halved to every other one whenever
+    ``max_records`` are reached), and whole fields at the ``snapshots`` times (which the
     step controller lands on exactly) and at T.
     """
 
-    def __init__(self, disc, T: float, snapshots=(), record_times=None, max_records: int = 2000):
+    def __init__(self, disc, T: float, snapshots=(), record_times=None, max_records: int = 2000,
+                 every_step: bool = False):
         self.disc = disc
         self.T = float(T)
         self.tol = 1e-9 * max(1.0, self.T)
         self.snapshot_times = sorted({float(t) for t in snapshots} | {self.T})
         self.record_times = None if record_times is None else np.sort(np.asarray(record_times, dtype=float))
         self.spacing = self.T / max_records
+        # every_step (error-controlled runs): every step, and beyond max_records every other one of those kept
+        self.every_step, self.max_records, self.stride = every_step, max_records, 1
         self.last = -np.inf
         self.times, self.steps = [], []
         self.u_probe, self.u_contact, self.beta = [], [], []
@@ -137,7 +142,18 @@ class Recorder:
         if self.record_times is not None:
             i = np.searchsorted(self.record_times, t - self.tol)
             return i < len(self.record_times) and abs(self.record_times[i] - t) <= self.tol
+        if self.every_step:
+            return self.step % self.stride == 0
         return t - self.last >= self.spacing * (1 - 1e-9)
+
+    def _decimate(self) -> None:
+        """Keep every other record (the first and last kept) and record every other step from now on."""
+        keep = list(range(0, len(self.times) - 1, 2)) + [len(self.times) - 1]
+        for seq in [self.times, self.steps, self.u_probe, self.u_contact, self.beta,
+                    *self.extra.values(), *self.node_extra.values()]:
+            if seq:
+                seq[:] = [seq[i] for i in keep]
+        self.stride *= 2
 
     def record(self, t: float, scheme, final: bool = False, control=None) -> None:
         """Offer the state at time t (the loop calls this after every step and after ``start``); ``control``:
@@ -159,6 +175,8 @@ class Recorder:
             for key, arr in scheme.node_values().items():
                 self.node_extra.setdefault(key, []).append(np.asarray(arr))
             assert all(len(v) == i + 1 for v in self.extra.values()), "diagnostics must be given at every record"
+            if self.every_step and len(self.times) > self.max_records:
+                self._decimate()
         if any(abs(t - s) <= self.tol for s in self.snapshot_times):
             self.snapshot(t, scheme)
 

@@ -9,7 +9,7 @@ exact for quadratics, so that each step solves
 
     (a0 K_A + K_G) u_n + j(beta_n, u_n, .) = F_n - K_A (a1 u_{n-1} + a2 u_{n-2})
 
-by the same condensed semismooth Newton as backward Euler
+(solved for the increment u_n - u_{n-1}) by the same condensed semismooth Newton as backward Euler
 (:class:`~workbench.schemes.implicit_euler.ImplicitEuler`); the first step is one
 backward-Euler step. sigma_n = P_Q [A eps(v_n) + G eps(u_n)] with v_n the BDF2 derivative.
 
@@ -57,22 +57,12 @@ class BDF2(ImplicitEuler):
         a2 = w * w / ((1 + w) * k)
         return a0, (a1, a2)
 
-    def _history(self, coefficients):
-        a1, a2 = coefficients
-        return a1 * self.history[-1][1] + a2 * self.history[-2][1]
-
-    def _rhs(self, k, a0, history):
+    def _rate_offset(self, history):
+        """w_n = a0 u_{n-1} + a1 u_{n-1} + a2 u_{n-2} = -a2 (u_{n-1} - u_{n-2}) (the coefficients sum to 0)."""
         if history is None:
-            return super()._rhs(k, a0, history)
-        h = self.d.u.vec.CreateVector()
-        h.FV().NumPy()[:] = self._history(history)
-        self.work.data = self.d.viscous.mat * h
-        self.rhs_np -= self.work.FV().NumPy()
-
-    def _velocity(self, u, k, a0, history):
-        if history is None:
-            return super()._velocity(u, k, a0, history)
-        return a0 * u + self._history(history)
+            return None
+        _, a2 = history
+        return -a2 * (self.history[-1][1] - self.history[-2][1])
 
     # -- the bonding field to second order ------------------------------------------------------------------------
     def _predict_beta(self, k: float, beta_old) -> None:
@@ -95,8 +85,9 @@ class BDF2(ImplicitEuler):
         d.beta.vec.FV().NumPy()[d.beta_dofs] = self.bonding.exponential_step(beta_old, r2, k)
 
     def error_constant(self, t: float, order: int = 2) -> float:
-        """BDF2's local error -(a1 k^3 + a2 K^3) u^(3) / (6 a0) (K = t - t_{n-2}) over the quadratic predictor's
-        (t - t_{n-1})(t - t_{n-2})(t - t_{n-3}) u^(3) / 6: -2/9 for constant steps."""
+        """BDF2's local error (a1 k^3 + a2 K^3) u^(3) / (6 a0) (K = t - t_{n-2}; from a0 (u_n - u(t_n)) = the
+        formula's truncation error) over the quadratic predictor's (t - t_{n-1})(t - t_{n-2})(t - t_{n-3}) u^(3) / 6:
+        2/9 for constant steps."""
         if order == 1:
             return super().error_constant(t, 1)
         t1, t2, t3 = (s[0] for s in self.history[-1:-4:-1])
@@ -105,7 +96,7 @@ class BDF2(ImplicitEuler):
         a0 = (1 + 2 * w) / ((1 + w) * k)
         a1 = -(1 + w) / k
         a2 = w * w / ((1 + w) * k)
-        return -(a1 * k ** 3 + a2 * K ** 3) / a0 / ((t - t1) * (t - t2) * (t - t3))
+        return (a1 * k ** 3 + a2 * K ** 3) / a0 / ((t - t1) * (t - t2) * (t - t3))
 
     def local_error(self, rtol, atol, order=None):
         if order is None and len(self.history) < 3:  # no quadratic predictor yet: backward Euler's estimate

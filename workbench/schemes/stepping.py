@@ -91,11 +91,16 @@ class AdaptiveSteps:
     """Error-controlled steps: k from the scaled local error (PI control), rejection, landing on kinks and sync times.
 
     After each step the loop reports the scheme's scaled local error (relative to
-    atol + rtol |u|, :meth:`workbench.schemes.base.Scheme.local_error`) and where in the
-    step a kink was crossed (``theta``). The error is judged **per unit step**:
-    err = local error x (T - t0) / k, so that the local errors of the whole run add up to
-    about the tolerance and the achieved global error is proportional to it (per step,
-    it would grow like tol^(p/(p+1)) only). A step is
+    atol + rtol U, U the largest |u| of the run so far,
+    :meth:`workbench.schemes.base.Scheme.local_error`) and where in the step a kink was
+    crossed (``theta``). The error is judged **per unit of elapsed time**:
+    err = local error x (t_n - t0) / k, so that the local errors up to any time t add up to
+    about rtol U(t) when u grows from rest like a power of t (the sum of rtol U(s) ds / s),
+    and to rtol U ln(t / k_1) at worst (a solution that starts large and stays). The
+    achieved global error is then about proportional to the tolerance. Per unit step
+    (x (T - t0) / k) cannot start from rest: relative to a u ~ t^2 it asks for k ~ rtol t^2 / T
+    (measured on the slab of issue 11: steps of 1e-8 s at t = 1e-3 s); per step (x 1) the
+    global error grows only like tol^(p/(p+1)). A step is
 
     * **rejected** when err > 1 (next try: k * max(0.2, 0.9 err^(-1/p))), when the
       nonlinear solve failed (k / 4), or when a kink lies inside it more than k_min from
@@ -105,17 +110,24 @@ class AdaptiveSteps:
       (a PI controller; measured on tp1 against the exact solution: 0-2 rejections per run and an
       achieved error of 0.25-0.4 times the tolerance for both schemes, where the gains 0.7 and 0.4
       rejected every third backward-Euler step), at most twice longer (BDF2's variable-step
-      formula is zero-stable only for step ratios below 1 + sqrt 2).
+      formula is zero-stable only for step ratios below 1 + sqrt 2), and kept as it is when it
+      could grow by less than 1.5 (:attr:`hold`).
 
     Steps are rounded down to k0 2^(j/4) (so that schemes which factor a matrix per step
     size meet the same few sizes again: they keep a small cache), shortened to land on the
-    ``sync`` times (snapshots, requested records) and on T, and kept within [k_min, k_max];
+    ``sync`` times (snapshots, requested records) and on T (halved when within 2 k of them, so
+    that no sliver of a step is left before them), for BDF2 at most twice the last step (also
+    after landing on an event), and kept within [k_min, k_max];
     when error control needs a step below k_min the run stops (:class:`StepTooSmall`).
     """
 
     adaptive = True
     #: PI gains (as multiples of 1/p), the safety factor and the largest growth of the step per step.
     alpha, beta, safety, max_growth = 0.5, 0.2, 0.9, 2.0  # measured on tp1: few rejections, error ~ 0.3 tol
+    #: A step that could grow by less than this factor is kept: each new step size costs a factorisation
+    #: (BDF2: each new ratio too). Measured on the slab of issue 11 (rtol 1e-2): 184 factorisations in 210
+    #: steps without.
+    hold = 1.5
 
     def __init__(self, T, k0, *, rtol, atol, k_min, k_max, order, sync=(), t0=0.0):
         self.t, self.T, self.k = float(t0), float(T), float(min(k0, k_max))
@@ -128,6 +140,8 @@ class AdaptiveSteps:
         self.accepted_steps = self.rejected_steps = 0
         self._t0 = float(t0)
         self._proposed = None
+        self._resume = None
+        self._k_last = None
 
     @property
     def t0(self) -> float:
@@ -149,26 +163,30 @@ class AdaptiveSteps:
         return self.k0 * 2.0 ** (j / 4)
 
     def next(self) -> tuple[float, float]:
-        k = min(self.k, self.k_max, self.T - self.t)
-        end = self.t + k
-        for s in self.sync:  # land on the next sync time (and do not leave a sliver before it)
-            if self.t + self.tol < s <= end + self.k_min:
-                end = s
-                break
-        if self.T - end < self.k_min:
-            end = self.T
+        k = min(self.k, self.k_max)
+        if self.order >= 2 and self._k_last:  # variable-step BDF2 is zero-stable for step ratios < 1 + sqrt 2
+            k = min(k, self.max_growth * self._k_last)
+        target = next((s for s in self.sync if s > self.t + self.tol), self.T)
+        d = target - self.t
+        # land on the next sync time (or T) without a sliver before it: one step if it is within k,
+        # two equal ones if within 2 k
+        end = target if d <= k * (1 + 1e-9) else self.t + d / 2 if d <= 2 * k else self.t + k
         self._proposed = end
         return self.t, end
 
     def per_unit_step(self, err):
-        """The scheme's local error estimate as an error per unit step (see the class docs)."""
-        return None if err is None else err * (self.T - self._t0) / (self._proposed - self.t)
+        """The scheme's local error estimate per unit of elapsed time (see the class docs)."""
+        return None if err is None else err * (self._proposed - self._t0) / (self._proposed - self.t)
 
     def accepted(self, err) -> None:
         p = self.order
         k = self._proposed - self.t
         self.t = self._proposed
+        self._k_last = k
         self.accepted_steps += 1
+        if self._resume is not None:  # a step that landed on an event: go on with the step from before the event
+            self.k, self._resume = self._resume, None
+            return
         if err is None:  # no estimate yet (the first steps): keep the step
             return
         err = max(err, 1e-10)
@@ -176,7 +194,10 @@ class AdaptiveSteps:
         if self.err_prev is not None:
             factor *= (self.err_prev / err) ** (self.beta / p)
         self.err_prev = err
-        self.k = self._quantize(min(self.k_max, max(self.k_min, k * min(self.growth, max(0.2, factor)))))
+        factor = min(self.growth, max(0.2, factor))
+        if 1.0 <= factor < self.hold:  # keep the step (and the factored matrix) unless it can grow clearly
+            factor = 1.0
+        self.k = self._quantize(min(self.k_max, max(self.k_min, k * factor)))
 
     def rejected(self, err=None, theta=None, failed=False) -> None:
         """Shorten the step after a rejection (see the class docs); StepTooSmall below k_min."""
@@ -201,6 +222,9 @@ class AdaptiveSteps:
         err = self.per_unit_step(err)
         k = self._proposed - self.t
         if theta is not None and theta * k > self.k_min and (1 - theta) * k > self.k_min:
+            if self._resume is None:  # the step to go on with after landing: what the error asked for
+                ok = err is None or err <= 1.0
+                self._resume = self._quantize(k if ok else k * max(0.2, 0.9 * err ** (-1.0 / self.order)))
             self.rejected(theta=theta)
             return False
         if err is not None and err > 1.0:

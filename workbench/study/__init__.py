@@ -132,7 +132,7 @@ class Study:
 
     def _times(self):
         """Common record times (the coarsest grid, if on every grid) and the field comparison times."""
-        from ..run import time_grid
+        from ..runner import time_grid
 
         T = self.scene["T"]
         ks = sorted({c.k for c in self.cases + (self.reference.cases() if self.reference else [])}, reverse=True)

@@ -34,7 +34,7 @@ def run_case(scene, case_values, record_times, snapshots, extra_attrs):
     import xarray as xr
 
     from ..errors import Diverged, StepTooLarge
-    from ..run import run
+    from ..runner import run
 
     _peak_memory_reset()  # workers are reused: the peak must be this case's
     sc = scene.with_(snapshots=tuple(snapshots), **case_values)

@@ -64,7 +64,7 @@ def penetration(ds: xr.Dataset) -> float:
 
     Examples
     --------
-    >>> from workbench.run import run
+    >>> from workbench.runner import run
     >>> ds = run("slab", h=0.1, k=0.05, T=0.1, traction_top="(0, -1)", progress=False)
     >>> penetration(ds) > 0  # pressed into the foundation
     True
@@ -75,7 +75,7 @@ def penetration(ds: xr.Dataset) -> float:
 def run_records(ds: xr.Dataset, max_records: int | None = None) -> xr.Dataset:
     """The records that a plain :func:`workbench.run` keeps, from a run recorded at every step.
 
-    A plain run of more than ``max_records`` (default :data:`workbench.run.MAX_RECORDS`) steps keeps
+    A plain run of more than ``max_records`` (default :data:`workbench.runner.MAX_RECORDS`) steps keeps
     t = 0, T and one step whenever T / max_records has passed since the last kept one; a study case
     records every step of its grid. Measures that are maxima over the recorded times (the penetration,
     the largest increase of beta, a first crossing time) then see the same records as a plain run of
@@ -94,7 +94,7 @@ def run_records(ds: xr.Dataset, max_records: int | None = None) -> xr.Dataset:
     >>> kept.sizes["time"], kept.step.values[:3].tolist(), int(kept.step[-1])
     (1668, [0, 3, 6], 5000)
     """
-    from ..run import MAX_RECORDS
+    from ..runner import MAX_RECORDS
 
     max_records = MAX_RECORDS if max_records is None else int(max_records)
     n_steps = int(ds.attrs.get("nsteps", ds.sizes.get("time", 1) - 1))
@@ -128,7 +128,7 @@ def summary(ds: xr.Dataset) -> dict:
 
     Examples
     --------
-    >>> from workbench.run import run
+    >>> from workbench.runner import run
     >>> s = summary(run("tp4", h=0.1, k=0.05, T=0.1, scheme="implicit", progress=False))
     >>> s["steps_done"], s["beta_in_range"], s["beta_monotone"], s["newton_max"] >= 1
     (2, 1, 1, True)
