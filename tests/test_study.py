@@ -276,3 +276,20 @@ def test_sweep_any_parameter_with_its_own_reference():
     assert ds.error.dims == ("h", "k", "order", "scheme", "c_nu")
     assert np.isfinite(ds.error.values).all() and (ds.error.sel(h=0.025) < ds.error.sel(h=0.05)).all()
     assert ds.observed_order.sel(norm="error", along="h").dims == ("order", "scheme", "c_nu")
+
+
+def test_tolerance_sweep_of_error_controlled_runs(tmp_path):
+    """An rtol axis: error-controlled runs have no fixed grid, so they are recorded and compared at the common
+    comparison times (which the controller lands on); the achieved error falls with the tolerance and stays
+    within a decade of it, BDF2 below backward Euler; the tolerance plot is drawn."""
+    from workbench import plotting
+
+    st = Study("tp1", sweep={"rtol": [1e-2, 1e-4]}, scheme=["implicit", "bdf2"], reference="exact", workers=0)
+    ds = st.run(progress=False)
+    err = ds.error.squeeze()
+    assert err.dims == ("scheme", "rtol") and np.isfinite(err.values).all()
+    assert (err.sel(rtol=1e-4) < err.sel(rtol=1e-2)).all()
+    assert (err < 10 * err.rtol).all() and (err.sel(scheme="bdf2") < err.sel(scheme="implicit")).all()
+    assert (ds.nsteps.squeeze().sel(rtol=1e-4) > ds.nsteps.squeeze().sel(rtol=1e-2)).all()
+    plotting.tolerance(ds, tmp_path / "tol.png")
+    assert os.path.getsize(tmp_path / "tol.png") > 10_000

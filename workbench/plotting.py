@@ -171,6 +171,39 @@ def convergence(study_ds, path=None, norms=("error", "error_V", "error_Q", "erro
     return _save(fig, path)
 
 
+def tolerance(study_ds, path=None, error="error", cost="wall_time"):
+    """Error-controlled sweeps (an ``rtol`` axis): the achieved error against the tolerance (with the lines
+    error = rtol, 0.1 rtol and 10 rtol), and the cost against the achieved error, one line per other case."""
+    if "rtol" not in study_ds.dims:
+        raise ValueError("tolerance plots need a study with an rtol axis (sweep={'rtol': [...]})")
+    rtol = study_ds.rtol.values
+    err_all = study_ds[error]
+    c_all = study_ds[cost] + (study_ds["setup_time"] if cost == "wall_time" else 0)
+    fig, (left, right) = figure(1, 2, figsize=(9, 3.8))
+    for sel in _combinations(err_all, ["rtol"]):
+        y, c = np.ravel(err_all.sel(sel).values), np.ravel(c_all.sel(sel).values)
+        good = np.isfinite(y) & (y > 0) & (rtol > 0)
+        if not good.any():
+            continue
+        label = _label(sel) or "cases"
+        left.loglog(rtol[good], y[good], "o-", label=label)
+        right.loglog(y[good], c[good], "o-", label=label)
+        for x, yy, cc in zip(rtol[good], y[good], c[good]):
+            right.annotate(f"{x:g}", (yy, cc), xytext=(3, 3), textcoords="offset points", fontsize=6)
+    lo, hi = rtol[rtol > 0].min(), rtol.max()
+    grid = np.array([lo, hi])
+    for factor, style in ((1.0, "-"), (0.1, ":"), (10.0, ":")):
+        left.loglog(grid, factor * grid, style, color="gray", lw=0.8)
+    units = err_all.attrs.get("units", "")
+    left.set(xlabel="rtol [1]", ylabel=f"{error} [{units}]", title="achieved error (gray: rtol, 0.1 and 10 rtol)")
+    right.set(xlabel=f"{error} [{units}]", ylabel=f"{cost} + setup [s]" if cost == "wall_time" else f"{cost} [s]",
+              title="cost (points labelled by rtol)")
+    left.legend(fontsize=7)
+    fig.suptitle(f"{plain(study_ds.attrs.get('scene'))}: error control, reference "
+                 f"{plain(study_ds.attrs.get('reference'))}", fontsize=9)
+    return _save(fig, path)
+
+
 def pareto(study_ds, path=None, error="error", cost="wall_time"):
     """Error against cost (wall time incl. setup) of every case; the Pareto front (``study_ds.pareto``) joined and
     numbered, the numbers explained beside the plot."""

@@ -130,17 +130,32 @@ class Study:
             self._scenes[key] = self.scene.with_(**case.values(), **extra)
         return self._scenes[key]
 
+    def _adaptive(self, case) -> bool:
+        """Whether the case runs error-controlled steps (rtol > 0): its k is only the first step."""
+        return self.scene_of(case)["rtol"] > 0
+
     def _times(self):
-        """Common record times (the coarsest grid, if on every grid) and the field comparison times."""
+        """Common record times (the coarsest fixed grid, if on every fixed grid) and the field comparison times.
+
+        Error-controlled cases have no grid: they are compared (and recorded) at the comparison times, which
+        their step controller lands on; with only such cases these are n_compare equal stretches of [0, T].
+        """
         from ..runner import time_grid
 
         T = self.scene["T"]
-        ks = sorted({c.k for c in self.cases + (self.reference.cases() if self.reference else [])}, reverse=True)
+        every = self.cases + (self.reference.cases() if self.reference else [])
+        ks = sorted({c.k for c in every if not self._adaptive(c)}, reverse=True)
+        if not ks:
+            common = np.linspace(0.0, T, self.n_compare + 1)
+            return common, common[1:]
         grids = [time_grid(T, k) for k in ks]
         coarse = grids[int(np.argmin([len(g) for g in grids]))]
         common = np.array([t for t in coarse if all(np.min(np.abs(g - t)) <= 1e-9 * max(T, 1.0) for g in grids)])
         idx = np.unique(np.round(np.linspace(0, len(common) - 1, self.n_compare + 1)).astype(int))[1:]
         return common, common[idx]
+
+    def _record_times(self, case, record, compare):
+        return [0.0] + list(compare) if self._adaptive(case) else list(record)
 
     # -- running ---------------------------------------------------------------------------------------
     def run(self, archive=None, *, progress=None) -> xr.Dataset:
@@ -158,7 +173,7 @@ class Study:
         todo = list(dict.fromkeys(self.listed + (self.reference.cases() if self.reference else [])))
         runs, missing, expected = {}, [], {}
         for case in todo:
-            expected[case] = inputs(self.scene_of(case, compare), record, compare)
+            expected[case] = inputs(self.scene_of(case, compare), self._record_times(case, record, compare), compare)
             ds, reason = read_case(archive / f"{case.key}.nc", expected[case])
             if ds is not None:
                 runs[case] = ds
@@ -168,7 +183,7 @@ class Study:
                                   RuntimeWarning, stacklevel=2)
                 missing.append(case)
         missing.sort(key=self._cost_estimate, reverse=True)  # biggest first, so the pool ends evenly
-        tasks = [(c, (self.scene, c.values(), list(record), list(compare),
+        tasks = [(c, (self.scene, c.values(), self._record_times(c, record, compare), list(compare),
                       {"case_inputs": canonical(expected[c]), "case_fingerprint": fingerprint(expected[c])}))
                  for c in missing]
         if self.client is not None:
