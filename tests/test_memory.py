@@ -53,6 +53,61 @@ def test_prony_recursion_equals_quadrature():
         assert "memory" in a.attrs["terms"]
 
 
+POWER_LAW = "(1 + t/0.05)**(-1.5)"  # no exact Prony form: a fit must really approximate it
+
+
+@pytest.mark.parametrize("tol", [1e-3, 1e-6])
+def test_exponential_sum_meets_its_bound(tol):
+    """The fitted exponential sum of a power-law kernel is within the stated bound of b, checked here on points
+    of its own (random and near 0, none of the fit's), and the bound it states is <= the tolerance asked."""
+    from workbench.physics.kelvin_voigt import Scalar
+    from workbench.physics.memory import GeneralKernel
+
+    b = lambda t: (1 + np.asarray(t) / 0.05) ** -1.5  # noqa: E731
+    fit = GeneralKernel(lambda t: b(t), Scalar(2.0)).exponential_sum(T=1.0, tol=tol)
+    t = np.concatenate([np.random.default_rng(1).uniform(0, 1, 50000), np.geomspace(1e-9, 1e-2, 3000)])
+    approx = sum(C.modulus * np.exp(-t / tau) for C, tau in fit.terms) / 2.0
+    assert fit.fit["error"] <= tol and np.abs(approx - b(t)).max() <= 1.05 * fit.fit["error"] + 1e-14
+    assert fit.base[0].modulus == 2.0 and len(fit.base[1]) == fit.fit["terms"] <= 32
+
+
+def test_exponential_kernel_runs_match_the_quadrature_at_flat_cost():
+    """memory_slab with a power-law kernel. Rectangle rule: the exponential-sum run is within the fit's error of
+    the O(n) quadrature (the same rule with the exact kernel). Both rules: it equals the run with the fitted
+    terms given as an ordinary Prony series (32 stiffness matrices; the fitted run shares one). (The trapezoid
+    rule integrates a Prony term exactly against piecewise-linear u and a general kernel by the product trapezoid
+    rule, so there the two differ by O(k^2).) It records the terms and the bound, keeps no history of u and
+    applies the memory with one matvec per step, whatever the number of terms."""
+    from workbench import discretisation
+    from workbench.schemes import scheme_class
+
+    kernel = dict(prony=(), kernel=POWER_LAW, kernel_E=-1000.0, kernel_nu=0.3, h=0.1, k=0.02)
+    for rule in ("rectangle", "trapezoid"):
+        fitted = workbench.run("memory_slab", memory_rule=rule, kernel_approximation="exponentials", kernel_tol=1e-8,
+                               progress=False, **kernel)
+        u = fitted.u_contact.values
+        scale = np.abs(u).max()
+        assert fitted.attrs["kernel_terms"] >= 8 and fitted.attrs["kernel_fit_error"] <= 1e-8
+        if rule == "rectangle":
+            exact = workbench.run("memory_slab", memory_rule=rule, progress=False, **kernel)
+            assert np.abs(exact.u_contact.values - u).max() <= 1e-7 * scale
+        terms = workbench.scene("memory_slab", kernel_approximation="exponentials", kernel_tol=1e-8,
+                                **kernel).model_of().memory
+        prony = [(-1000.0 * c, 0.3, tau) for c, (_, tau) in zip(terms.base[1], terms.terms)]
+        plain = workbench.run("memory_slab", memory_rule=rule, progress=False, **dict(kernel, prony=prony, kernel="0"))
+        assert np.abs(plain.u_contact.values - u).max() <= 1e-10 * scale
+    sc = workbench.scene("memory_slab", kernel_approximation="exponentials", **kernel)
+    sch = scheme_class("vi")(discretisation.build(sc))
+    calls = []
+    sch._add_matvec = lambda K, H, out: calls.append(K)
+    sch.start(0.0)
+    sch.accept(0.0)
+    for n in range(3):
+        sch.step(n * 0.02, (n + 1) * 0.02)
+        sch.accept((n + 1) * 0.02)
+    assert sch.stored is None and len(sch.histories) == fitted.attrs["kernel_terms"] and len(calls) == 3
+
+
 def test_static_elastic_recovered():
     """No memory, nothing touching (pulled up): each step is the static plane-stress solution."""
     ds = workbench.run("memory_slab", prony=(), h=0.1, k=0.25, traction_top="(0, 30*t)", progress=False)

@@ -63,7 +63,8 @@ class Discretisation:
         The bonding field (P0 on the contact facets); ``beta_dofs`` its dofs in facet order,
         ``facet_measure`` and ``facet_xyz`` (midpoints) alongside.
     memory : list
-        Model B: (K_C, C, tau_or_shape) per relaxation tensor.
+        Model B: (K_C, C, tau_or_shape) per relaxation tensor (``memory_scale``: where the terms of a fitted
+        kernel share one K_C, the stiffness of term i is memory_scale[i] K_C).
     contact_weights : ndarray
         Model B: w_i = int_Gamma3 phi_i da at the contact vertices.
     """
@@ -79,6 +80,7 @@ class Discretisation:
         self.side = self.rate_side = self.beta = None
         self.beta_dofs = self.facet_measure = self.facet_xyz = None
         self.memory, self.memory_kind, self.contact_weights = [], "none", None
+        self.memory_scale = None  # K_i = memory_scale[i] * memory[i][0] when terms share a stiffness (else 1)
         self._index_arrays()
         self.loads = Loads(model.loads, fes, self.t, self.geometry, self.vertex_dofs, self.vertex_xyz)
 
@@ -392,7 +394,12 @@ def _memory_parts(d: Discretisation) -> None:
     d.elastic = stiffness(d.fes, m.elastic, d.dim)
     if m.memory is not None:
         d.memory_kind = m.memory.kind
-        if m.memory.kind == "prony":
+        if m.memory.kind == "prony" and m.memory.base is not None:
+            # a fitted kernel: C_i = c_i C, so one stiffness serves all terms (and one matvec per step)
+            K = stiffness(d.fes, m.memory.base[0], d.dim)
+            d.memory = [(K, C, tau) for C, tau in m.memory.terms]
+            d.memory_scale = list(m.memory.base[1])
+        elif m.memory.kind == "prony":
             d.memory = [(stiffness(d.fes, C, d.dim), C, tau) for C, tau in m.memory.terms]
         else:
             d.memory = [(stiffness(d.fes, m.memory.tensor, d.dim), m.memory.tensor, m.memory.shape)]

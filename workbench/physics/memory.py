@@ -26,13 +26,15 @@ import numpy as np
 
 class Prony:
     """B(t) = sum_i C_i exp(-t / tau_i), given as [(C_i, tau_i)]; ``fit`` says how it approximates a general
-    kernel when it does (terms, error bound)."""
+    kernel when it does (terms, error bound); ``base = (C, [c_i])`` says that C_i = c_i C (a fitted kernel), so
+    that one stiffness matrix serves every term."""
 
     kind = "prony"
 
-    def __init__(self, terms, fit=None):
+    def __init__(self, terms, fit=None, base=None):
         self.terms = list(terms)
         self.fit = fit
+        self.base = base
 
     def decays(self, k: float) -> list:
         """exp(-k / tau_i): the one-step factors of the histories."""
@@ -90,4 +92,5 @@ class GeneralKernel:
             m *= 2
         taus, c, err = best
         terms = [(self.tensor.scaled(float(ci)), float(ti)) for ci, ti in zip(c, taus)]
-        return Prony(terms, fit={"terms": len(terms), "error": err, "tol": tol, "T": float(T)})
+        return Prony(terms, fit={"terms": len(terms), "error": err, "tol": tol, "T": float(T)},
+                     base=(self.tensor, [float(ci) for ci in c]))

@@ -65,6 +65,7 @@ class MemoryVI(Scheme):
         self.sign = d.geometry.normal_sign  # u_nu = sign * u_C
         self.w = d.contact_weights[self.active_nodes]
         self._operators = OrderedDict()
+        self.scales = d.memory_scale or [1.0] * len(d.memory)  # (before _use: the step operator needs them)
         self._use(0.0)
         self.states = np.full(self.C.size, unilateral.SEPARATED)
         self.lam = np.zeros(self.C.size)
@@ -77,6 +78,11 @@ class MemoryVI(Scheme):
         # memory: Prony histories H_i (dof vectors) or the stored u_j for a general kernel
         n = d.ndof
         self.histories = [np.zeros(n) for _ in d.memory] if d.memory_kind == "prony" else []
+        groups = OrderedDict()  # terms sharing one stiffness: sum_i s_i H_i first, then one matvec
+        for i, (K, _, _) in enumerate(d.memory):
+            groups.setdefault(id(K), (K, []))[1].append(i)
+        self.groups = list(groups.values())
+        self.combined = np.zeros(n)
         self.stored = np.empty((64, n)) if d.memory_kind == "kernel" else None
         self.times = [0.0]
         self.diag = {}
@@ -109,7 +115,7 @@ class MemoryVI(Scheme):
         u = d.u.vec.FV().NumPy()
         t1, u1 = self.history[-1][0], self.history[-1][1]
         k = self.k_last
-        force = np.zeros(d.ndof)
+        force, deltas = np.zeros(d.ndof), []
         if self.trapezoid:
             t2, u2 = self.history[-2][0], self.history[-2][1]
             kp = t1 - t2
@@ -129,7 +135,8 @@ class MemoryVI(Scheme):
                     delta = (-k ** 3 / 12.0) * g
                 else:
                     delta = 0.5 * k * (b(0.0) * u - b(k) * u1)
-            self._add_matvec(K, delta, force)
+            deltas.append(delta)
+        self._apply_memory(deltas, force)
         force[d.dirichlet_dofs] = 0.0
         du = np.zeros(d.ndof)
         self.solver.solve(force, du)
@@ -165,8 +172,8 @@ class MemoryVI(Scheme):
                 M = d.elastic.mat.CreateMatrix()
                 vec = M.AsVector()
                 vec.data = d.elastic.mat.AsVector()
-                for wi, (K, _, _) in zip(weights, d.memory):
-                    vec.data += wi * K.mat.AsVector()
+                for wi, si, (K, _, _) in zip(weights, self.scales, d.memory):
+                    vec.data += (wi * si) * K.mat.AsVector()
             solver = solvers.factor(M, d.fes.FreeDofs(), d.u.vec, d.scene["solver"])
             S_inv = CondensedSystem(solver, d.ndof, self.C).S0_inv  # (sign^2 = 1: the same in s)
             # z = s + rho lam / S_ii-scaled: the prox scaling comes from the body's own stiffness. A large factor
@@ -197,7 +204,7 @@ class MemoryVI(Scheme):
                 else:
                     H += k * u_prev
                     H *= decay
-                self._add_matvec(K, H, out_np)
+            self._apply_memory(self.histories, out_np)
         elif d.memory_kind == "kernel":
             K = d.memory[0][0]
             n = len(self.times) - 1  # u_0 ... u_{n} stored after this append
@@ -219,6 +226,17 @@ class MemoryVI(Scheme):
         for H, w in zip(self.histories, self._weights):
             if w:
                 H += w * u
+
+    def _apply_memory(self, vectors, out_np):
+        """out += sum_i s_i K_i vectors[i], one matvec per distinct stiffness (a fitted kernel's 32 terms: one)."""
+        for K, members in self.groups:
+            if len(members) == 1 and self.scales[members[0]] == 1.0:
+                self._add_matvec(K, vectors[members[0]], out_np)
+                continue
+            self.combined[:] = 0.0
+            for i in members:
+                self.combined += self.scales[i] * vectors[i]
+            self._add_matvec(K, self.combined, out_np)
 
     def _add_matvec(self, K, H, out_np):
         self.tmp.FV().NumPy()[:] = H
