@@ -1,0 +1,99 @@
+"""What a researcher gets out: archive metadata, defaults that are not locked, figures and exports that show what they
+claim (items 16-18 of the new-user defects issue)."""
+import subprocess
+import sys
+import warnings
+
+import numpy as np
+import pytest
+import xarray as xr
+
+import workbench
+from workbench.parameters import PARAMETERS
+
+
+def _cli(*args, cwd=None):
+    return subprocess.run([sys.executable, "-m", "workbench.cli", *args], capture_output=True, text=True, cwd=cwd,
+                          timeout=600)
+
+
+def test_archive_metadata_survives_the_round_trip(tmp_path):
+    """CF Conventions, the full command in history, NAME_units for every parameter attribute that has a unit,
+    long_name and units on every coordinate - in the archive a CLI run writes, read back from disk."""
+    out = tmp_path / "r.nc"
+    p = _cli("run", "tp1", "--h", "0.1", "--k", "0.05", "--set", "T=0.2", "-o", str(out), "--no-progress")
+    assert p.returncode == 0, p.stderr
+    with xr.open_dataset(out) as ds:
+        a = ds.attrs
+        assert a["Conventions"].startswith("CF-")
+        assert "workbench run tp1 --h 0.1 --k 0.05 --set T=0.2" in a["history"]
+        units = {name: p.unit for name, p in PARAMETERS.items()}
+        with_unit = [name for name in a if name in units and units[name]]
+        assert len(with_unit) >= 10 and all(a[f"{name}_units"] == units[name] for name in with_unit)
+        for name, coord in ds.coords.items():
+            assert coord.attrs.get("long_name") and "units" in coord.attrs, name
+
+
+def test_generic_block_is_not_locked_and_p1_on_a_thin_body_warns():
+    """The generic block defaults to P2 (its P1 default was ~50 % locked); P1 asked for on a thin generic body
+    warns; the paper presets keep the paper's P1 and say nothing."""
+    assert workbench.scene("block")["order"] == 2
+    with warnings.catch_warnings(record=True) as caught:
+        warnings.simplefilter("always")
+        workbench.run("slab", order=1, h=0.1, k=0.05, T=0.05, progress=False)
+    assert any("lock" in str(w.message) for w in caught)
+    for name in ("tp4", "tp5"):
+        assert workbench.scene(name)["order"] == 1
+        with warnings.catch_warnings(record=True) as caught:
+            warnings.simplefilter("always")
+            workbench.run(name, h=0.1, k=0.02, T=0.04, progress=False)
+        assert not any("lock" in str(w.message) for w in caught), name
+
+
+def test_figures_say_what_they_show(tmp_path):
+    """Fields in a perceptually uniform map (not jet); the tp2 figure says that the paper's curves disagree with
+    the reduced ODE; every convergence panel has a y-label with units."""
+    from workbench import plotting
+    from workbench.paper import figures
+    from workbench.study import Study
+
+    ds = workbench.run("tp5", h=0.1, k=0.01, T=0.1, snapshots=[0.1], progress=False)
+    fig = figures.slab_von_mises(ds)
+    cmaps = {im.get_cmap().name for ax in fig.axes for im in ax.collections + ax.images if im.get_array() is not None}
+    assert "viridis" in cmaps and "jet" not in cmaps
+    tp2 = workbench.run("tp2", h=0.1, k=0.05, progress=False)
+    fig = figures.rod_displacement_evolution(tp2)
+    titles = " ".join([fig._suptitle.get_text() if fig._suptitle else ""] + [ax.get_title() for ax in fig.axes])
+    assert "disagree with the reduced ODE" in titles, titles
+    st = Study("tp1", k=[0.1, 0.05], h=[0.1], reference="exact", workers=0)
+    fig = plotting.convergence(st.run(progress=False))
+    labels = [ax.get_ylabel() for ax in fig.axes if ax.lines]
+    assert labels and all("[" in y for y in labels), labels
+
+
+def test_model_b_overview_and_vtk_show_pressure_and_states(tmp_path):
+    """Model B's overview shows contact pressure and states (no 'no adhesion' panel); its VTK export carries
+    both as point data of the contact boundary."""
+    import meshio
+
+    from workbench import plotting, vtk
+
+    ds = workbench.run("memory_slab", h=0.25, k=0.1, snapshots=[0.5], progress=False)
+    fig = plotting.overview(ds)
+    titles = " ".join(ax.get_title() for ax in fig.axes).lower()
+    assert "pressure" in titles and "state" in titles and "adhesion" not in titles
+    files = vtk.export(ds, tmp_path)
+    mesh = meshio.read([f for f in files if str(f).endswith(".vtu")][-1])
+    assert {"contact_pressure", "contact_state"} <= set(mesh.point_data)
+    free = mesh.point_data["contact_state"] >= 0  # (-1: a clamped vertex, no contact unknown: NaN pressure)
+    assert free.sum() >= 3 and np.isfinite(mesh.point_data["contact_pressure"][free]).all()
+    assert np.isnan(mesh.point_data["contact_pressure"][~free]).all()
+
+
+def test_run_with_output_prints_one_status_line(tmp_path):
+    """`workbench run ... -o` says what happened: status, steps and time in one line, then where it wrote."""
+    p = _cli("run", "tp1", "--h", "0.1", "--k", "0.05", "-o", str(tmp_path / "r.nc"), "--no-progress")
+    assert p.returncode == 0, p.stderr
+    lines = [li for li in p.stdout.splitlines() if li.strip()]
+    assert len(lines) == 2 and lines[1].startswith("wrote "), p.stdout
+    assert lines[0].startswith("tp1: complete, 20 steps") and " s " in lines[0], p.stdout
