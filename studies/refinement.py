@@ -2,7 +2,7 @@
 
 Run:  python studies/refinement.py [slab | memory | rod | all] [--out data/refinement] [--quick]
 
-* ``rod``    — tp1 and tp2 k-sweeps (Model A) against the exact / reduced-ODE solution (SPEC).
+* ``rod``    — tp1 and tp2 k-sweeps (Model A) against the exact / reduced-ODE solution (docs/models.md).
 * ``slab``   — Model A, tp5 (the paper's slab, periodic traction), coupled k = 0.2 h with the
   paper's explicit scheme (k stays below k_crit ~ 0.03), P1 and P2, against the finest P2 case.
 * ``memory`` — Model B, memory_slab, coupled k = 0.4 h, P1, against the finest case.

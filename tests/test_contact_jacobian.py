@@ -7,7 +7,7 @@ tests/pytest/test_contact.py checks AssembleLinearization against Apply), at ran
 quadrature points are, almost surely, away from the kinks of (.)_+, R and R*.
 
 p_nu(r) = c_nu (r_+)^m_nu: the implicit scheme is checked for m_nu = 1.5, 2, 3 against the reduced
-rod ODE (SPEC, Appendix A; scipy Radau, independent of the schemes) and against the explicit scheme
+rod ODE (docs/models.md, Appendix A; scipy Radau, independent of the schemes) and against the explicit scheme
 at a small step on the slab.
 """
 import numpy as np

@@ -75,3 +75,20 @@ def test_command_runs(line, scratch):
                        timeout=600)
     assert p.returncode == 0, f"$ {line}\n--- stdout:\n{p.stdout[-2000:]}\n--- stderr:\n{p.stderr[-3000:]}"
     assert "Traceback" not in p.stderr
+
+
+def test_readme_scene_file_is_the_example_file():
+    """The README shows docs/examples/slab_pull.toml (and says so): its TOML block is that file, byte for byte."""
+    (block,) = [m.group(2) for m in FENCE.finditer((ROOT / "README.md").read_text()) if m.group(1) == "toml"]
+    assert block == (ROOT / "docs" / "examples" / "slab_pull.toml").read_text()
+
+
+def test_no_reference_to_a_file_outside_the_repository():
+    """The docstrings and notes referred to a model statement outside the repository (in a shared folder beside it,
+    by its name in capitals); they refer to docs/ instead."""
+    outside = re.compile(r"\b" + "SP" + r"EC\b|\.\./shared|shared/" + "SP")
+    files = [ROOT / "README.md"] + [p for d in ("workbench", "studies", "docs", "tests") for p in (ROOT / d).rglob("*")
+                                    if p.suffix in (".py", ".md", ".toml", ".txt")]
+    hits = [f"{p.relative_to(ROOT)}:{i}" for p in files for i, line in enumerate(p.read_text().splitlines(), 1)
+            if outside.search(line)]
+    assert not hits, hits

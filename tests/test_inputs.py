@@ -138,6 +138,34 @@ def test_divergence_stops_and_keeps(tmp_path):
     assert proc.returncode == 2 and "k_crit" in proc.stderr and not (tmp_path / "refused.nc").exists()
 
 
+def test_divergence_message_states_the_limit_used():
+    """The bound in the Diverged message is the one used: a given ``limit`` (it said "10 x the body" whatever the
+    limit); the default, 10 x the body's largest extent, says so. A limit that is not a number > 0 is refused."""
+    with pytest.raises(workbench.Diverged) as err:
+        workbench.run("tp1", k=0.05, h=0.1, limit=1e-3, progress=False)
+    message = str(err.value)
+    assert "beyond the bound 0.001 m (limit = 0.001 m, as given)" in message and "10 x" not in message
+    with pytest.raises(workbench.Diverged, match=r"beyond the bound 10 m \(10 x the body's largest extent, the "
+                                                 r"default limit\)"):
+        workbench.run("tp1", k=0.05, h=0.1, delta="-0.6 - 100*t", progress=False)
+    for bad in (0, -1.0, "1"):
+        with pytest.raises(ParameterError, match="limit = "):
+            workbench.run("tp1", k=0.05, limit=bad, progress=False)
+
+
+@pytest.mark.parametrize("module", ["workbench", "workbench.geometry", "workbench.physics.kelvin_voigt",
+                                    "workbench.physics.laws", "workbench.scenes", "workbench.models", "workbench.cli"])
+def test_checking_a_scene_does_not_import_ngsolve(module):
+    """``import workbench`` is lazy so that ``workbench scenes`` / ``show`` and a scene's checks start at once; the
+    geometry and the material tensors imported NGSolve at module level (so did every scene). NGSolve is imported
+    where a mesh or a form is made. Each in a fresh interpreter."""
+    code = (f"import sys, workbench; import {module}; sc = workbench.scene('slab', plane='strain'); sc.model_of(); "
+            "print('ngsolve' in sys.modules)")
+    p = subprocess.run([sys.executable, "-c", code], capture_output=True, text=True)
+    assert p.returncode == 0, p.stderr
+    assert p.stdout.split() == ["False"], f"importing {module} (and checking a scene) imported ngsolve"
+
+
 def test_cli(tmp_path):
     run = lambda *a: subprocess.run([sys.executable, "-m", "workbench.cli", *a], capture_output=True, text=True)  # noqa: E731
     p = run("scenes")
@@ -151,3 +179,14 @@ def test_cli(tmp_path):
     assert p.returncode == 0, p.stderr
     ds = workbench.load(out)
     assert ds.attrs["gamma_nu"] == 0.5 and ds.attrs["k"] == 0.05 and png.stat().st_size > 10_000
+
+
+def test_cli_main_in_a_session_does_not_leak_its_command_line(tmp_path):
+    """`workbench.cli.main([...])` called in-process (a notebook, a test) marks its own archives with its command, and
+    a later library call is recorded as that call, not as the command that ran before it."""
+    from workbench import cli
+
+    assert cli.main(["run", "tp1", "--h", "0.1", "--k", "0.1", "-o", str(tmp_path / "a.nc"), "--no-progress"]) == 0
+    assert "workbench run tp1" in workbench.load(tmp_path / "a.nc").attrs["history"]
+    later = workbench.run("tp1", h=0.1, k=0.1, progress=False).attrs["history"]
+    assert "workbench.run('tp1', h=0.1, k=0.1)" in later and "workbench run" not in later

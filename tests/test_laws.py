@@ -6,7 +6,9 @@ the integrand of j) and as NumPy arrays at the contact quadrature points (the ti
 
 * NumPy tractions = the NGSolve integrand evaluated at the same points (to round-off);
 * NumPy slopes = central finite differences of the NumPy tractions, away from the kinks;
-* |slope| <= max_slope(beta0) on states with beta <= beta0 (the explicit scheme's stability limit uses it).
+* |slope| <= max_slope(beta0) on states with beta <= beta0 (the explicit scheme's stability limit uses it);
+* the sum of the laws (workbench.physics.contact.Contact): its largest normal slope is the largest central finite
+  difference of the summed traction, terms on the same side of u_nu = 0 adding (the two pulls at u_nu -> -L).
 
 And the contact side (workbench.boundary): T^T (w p(T u)) equals NGSolve's assembled boundary linear form of the
 same law (to round-off), for P1 and P2 in 2D and 3D, so the quadrature points are NGSolve's own.
@@ -74,6 +76,27 @@ def test_slopes_are_derivatives_and_bounded(term):
             fd = (term.tangential_traction(NP, u_tau + e, beta) - term.tangential_traction(NP, u_tau - e, beta)) / (2 * eps)
             np.testing.assert_allclose(J[:, :, c], fd, rtol=1e-5, atol=1e-6)
         assert np.linalg.norm(J, 2, axis=(1, 2)).max() <= tangential * (1 + 1e-12)
+
+
+def test_max_slope_of_the_sum_is_the_slope_of_the_summed_law():
+    """Contact.max_slope = max over u_nu of |d/du (sum of p_nu)| at beta = beta0, by finite differences.
+
+    Compliance (u_nu > gap) and the pulls (-L < u_nu < 0) act on opposite sides; the linear pull (gamma_nu) and the
+    power-law pull (q_p gamma_p at the bond length) are steepest together at u_nu -> -L, so there the slopes add.
+    """
+    from workbench.physics.contact import Contact
+
+    contact = Contact(laws())
+    L, gap = VALUES["L"], VALUES["gap"]
+    u_nu = np.linspace(-0.6, gap + L, 200001)  # the compliance stands in by its slope at a penetration of L
+    beta = np.full_like(u_nu, VALUES["beta0"])
+    eps = 1e-9
+    fd = (contact.normal(NP, u_nu + eps, beta) - contact.normal(NP, u_nu - eps, beta)) / (2 * eps)
+    normal, tangential = contact.max_slope(VALUES["beta0"])
+    expected = VALUES["gamma_nu"] + VALUES["q_p"] * VALUES["gamma_p"]
+    assert normal == pytest.approx(expected, rel=1e-12)
+    np.testing.assert_allclose(np.abs(fd).max(), normal, rtol=1e-3)
+    assert tangential == pytest.approx(VALUES["c_tau"] * VALUES["beta0"])
 
 
 @pytest.mark.parametrize("name, order", [("slab", 1), ("slab", 2), ("block", 1), ("block", 2)])

@@ -279,3 +279,22 @@ def test_rod_study_against_volterra_reference(memory):
     ds = st.run(progress=False)
     st.assert_order(1.0, tol=0.1, along="k", max_error=2e-3)
     assert "beta" not in ds and np.isfinite(ds.error_probe.values).all()
+
+
+def test_memory_benchmark_still_runs():
+    """studies/bench_memory.py drives MemoryVI by hand (start, then steps, as the time loop does): its --help and a
+    tiny run work against today's scheme protocol, and both kernels report a cost per step and the linear solves."""
+    import json
+    import subprocess
+    import sys
+    from pathlib import Path
+
+    script = Path(__file__).resolve().parents[1] / "studies" / "bench_memory.py"
+    p = subprocess.run([sys.executable, str(script), "--help"], capture_output=True, text=True)
+    assert p.returncode == 0 and "--steps" in p.stdout, p.stderr
+    p = subprocess.run([sys.executable, str(script), "--h", "0.5", "--steps", "12", "--k", "0.01"], capture_output=True,
+                       text=True, timeout=300)
+    assert p.returncode == 0, p.stderr
+    out = json.loads(p.stdout.splitlines()[-1])
+    for memory in ("prony", "kernel"):
+        assert out[memory]["ms_per_step"]["10"] > 0 and out[memory]["mean_solves"] >= 1

@@ -3,13 +3,13 @@
 References (all independent of the scheme under test):
 
 * Problem 1: the closed form beta = exp(-0.027 t), u = 0.09513 (e^{-0.054 t} - e^{-t}) x - 0.6
-  (paper eq. 7.11 with the exponent typo corrected, SPEC); the paper reports at h = k = 0.01
+  (paper eq. 7.11 with the exponent typo corrected, docs/choices.md); the paper reports at h = k = 0.01
   a displacement error < 1.8e-4 (Fig. 2) and a bonding error < 4e-6 (Fig. 4).
 * Problem 2: the reduced ODE A' + (1 + 0.1 beta^2) A = 0.01 beta^2, beta' = -0.1 beta (A - 0.1)^2
   (docs/models.md), Radau at rtol 1e-11; and, for the paper's curves, the same ODE with the
   adhesive pull's sign flipped (workbench.references.rod_ode of the flipped model: scalar formulas,
   independent of the finite-element code).
-* Problem 3: qualitative (SPEC): beta never increases and, with the tension-only truncation,
+* Problem 3: qualitative (docs/choices.md): beta never increases and, with the tension-only truncation,
   does not change while the rod end is compressed; the ODE of the rod bounds the error.
 * Problems 4–5: no reference; physical checks (beta(1, 0) falls from 1 but stays > 0.9 at T,
   the loaded tip moves with the load, the von Mises maximum sits at the clamp or the load).
@@ -46,7 +46,7 @@ def test_tp1_errors_meet_the_paper(results):
 
 
 def test_tp2_matches_its_ode_not_the_paper_curves(results):
-    """Problem 2 against the Radau ODE: error <= 2e-4; u(1, 1) = -0.0939, beta(1) = 0.99907 (SPEC)."""
+    """Problem 2 against the Radau ODE: error <= 2e-4; u(1, 1) = -0.0939, beta(1) = 0.99907 (docs/models.md)."""
     n = results["tp2"]["numbers"]
     assert n["u_err_fields"] <= 2e-4 and n["u_err_probes"] <= 2e-4
     assert n["beta_err"] <= 2e-5
@@ -128,6 +128,28 @@ def test_main_prints_the_comparison(tmp_path, capsys):
     text = capsys.readouterr().out
     assert "paper: < 1.8e-4" in text and "tp1" in text
     assert (tmp_path / "tp1_bonding.png").exists()
+
+
+@pytest.mark.parametrize("form", ["--out=DIR", "--out DIR"])
+def test_reproduce_script_writes_where_out_says(tmp_path, form):
+    """studies/reproduce.py writes into data/reproduction unless told otherwise; ``--out=DIR`` was not seen (the
+    script added its own ``--out``, which won): the results went into data/. Run on a copy of the script, so that its
+    default folder is tmp_path/data/reproduction and the repository's data/ is never at risk."""
+    import shutil
+    import subprocess
+    import sys
+    from pathlib import Path
+
+    script = tmp_path / "studies" / "reproduce.py"
+    script.parent.mkdir()
+    shutil.copy(Path(__file__).resolve().parent.parent / "studies" / "reproduce.py", script)
+    mine = tmp_path / "mine"
+    out = [f"--out={mine}"] if "=" in form else ["--out", str(mine)]
+    p = subprocess.run([sys.executable, str(script), "tp1", *out, "--h", "0.1", "--k", "0.05", "--no-side"],
+                       capture_output=True, text=True, cwd=tmp_path)
+    assert p.returncode == 0, p.stderr
+    assert workbench.load(mine / "tp1.nc").attrs["scene"] == "tp1"
+    assert not (tmp_path / "data").exists()
 
 
 VTK_ID = {"vertex": 1, "line": 3, "triangle": 5, "tetra": 10, "line3": 21, "triangle6": 22, "tetra10": 24}

@@ -1,14 +1,14 @@
 """The rod (paper Section 7.2, Test Problems 1–3) against independent references.
 
-With u0 = delta(0) the rod's displacement stays linear in x (SPEC), so P1 is
+With u0 = delta(0) the rod's displacement stays linear in x (docs/models.md), so P1 is
 exact in space and the error is the scheme's time error:
 
 * tp1: closed form beta = exp(-0.027 t), u = 0.09513 (e^{-0.054 t} - e^{-t}) x - 0.6
-  (SPEC, corrected exponents); the paper reports at h = k = 0.01 a displacement
+  (docs/choices.md: corrected exponents); the paper reports at h = k = 0.01 a displacement
   error < 1.8e-4 (Fig. 2) and a bonding error < 4e-6 (Fig. 4).
 * tp2: the reduced ODE A' + (1 + 0.1 beta^2) A = 0.01 beta^2, beta' = -0.1 beta (A - 0.1)^2,
   integrated by SciPy's Radau at rtol 1e-11 (workbench.references.rod_ode).
-* tp3: qualitative (SPEC): beta never increases, stays in [0, 1], and with the
+* tp3: qualitative (docs/choices.md): beta never increases, stays in [0, 1], and with the
   tension-only truncation is constant while the rod end is in compression.
 """
 import numpy as np
@@ -28,7 +28,7 @@ def max_errors(ds, solution):
 
 
 def test_tp1_paper_figures():
-    """tp1 at h = k = 0.01 meets the paper's reported errors (exact solution, SPEC)."""
+    """tp1 at h = k = 0.01 meets the paper's reported errors (exact solution, docs/models.md)."""
     ds = workbench.run("tp1", h=0.01, k=0.01, progress=False)
     err_u, err_b = max_errors(ds, tp1_exact())
     assert err_u <= 1.8e-4
@@ -50,7 +50,7 @@ def test_rod_order_in_k(name, order_of):
 
 
 def test_tp2_reference_values():
-    """The reduced ODE of tp2 gives u(1, 1) = -0.0939 and beta(1) = 0.99907 (SPEC), not the paper's curves."""
+    """The reduced ODE of tp2 gives u(1, 1) = -0.0939 and beta(1) = 0.99907 (docs/models.md), not the paper's curves."""
     u, beta = rod_ode(workbench.scene("tp2"))(1.0)
     assert u == pytest.approx(-0.0939, abs=5e-5)
     assert beta == pytest.approx(0.99907, abs=5e-6)
@@ -90,3 +90,27 @@ def test_tp3_against_ode():
     errs = [max_errors(workbench.run(sc.with_(k=k), progress=False), ref)[0] for k in (0.01, 0.005)]
     assert errs[1] < 6e-4
     assert 0.85 < np.log2(errs[0] / errs[1]) < 1.15
+
+
+def test_rod_ode_names_the_term_it_cannot_handle():
+    """rod_ode solves only the compliance and the linear pull: another term is refused by its name and the parameters
+    that declare it (it said "not ['power']", a name no term has), as a ParameterError (one line on the command line).
+    The pull with its sign flipped (the paper's Problem 2 diagnostic) is still solved."""
+    import dataclasses
+
+    from workbench.paper.reproduction import flipped_model
+    from workbench.physics.contact import Contact, ContactTerm
+
+    with pytest.raises(workbench.ParameterError) as err:
+        rod_ode(workbench.scene("tp1", gamma_p=1.0))
+    assert "'power_pull' (its parameters gamma_p, q_p)" in str(err.value)
+
+    class Cubic(ContactTerm):
+        name = "cubic"
+
+    sc = workbench.scene("tp1")
+    model = sc.model_of()
+    with pytest.raises(workbench.ParameterError, match="cannot handle the contact term 'cubic'"):
+        rod_ode(sc, model=dataclasses.replace(model, contact=Contact(model.contact.terms + (Cubic(),))))
+    sc = workbench.scene("tp2")
+    assert np.isfinite(rod_ode(sc, model=flipped_model(sc))(np.array([1.0]))[0]).all()

@@ -1,6 +1,6 @@
 """Refinement studies (workbench.study): orders through Study, resumable sweeps, dask, exact transfer.
 
-References: tp1's closed form / the reduced rod ODE (SPEC) for the rod k-sweeps; for 2D/3D the finest
+References: tp1's closed form / the reduced rod ODE (docs/models.md) for the rod k-sweeps; for 2D/3D the finest
 case of the sweep, compared on its mesh after exact prolongation (nested meshes).
 """
 import os
@@ -79,6 +79,20 @@ def test_block_sweep():
 def test_fit_order_stderr():
     rate, err = fit_order([0.1, 0.05, 0.025], [1.0, 0.5, 0.25])
     assert rate == pytest.approx(1.0) and err == pytest.approx(0.0, abs=1e-12)
+
+
+@pytest.mark.filterwarnings("error")
+@pytest.mark.parametrize("x, y", [([0.1], [1.0]), ([0.1, 0.05, 0.025], [1.0, np.nan, np.nan]), ([0.1, 0.05], [1.0, 0.0]),
+                                  ([0.1, 0.1, 0.1], [1.0, 2.0, 3.0]), ([], [])])
+def test_fit_order_without_two_usable_points_is_nan_and_quiet(x, y):
+    """Fewer than two finite, positive points (refused or diverged cases are NaN), or one x only: no slope, NaN
+    without a RankWarning, a log warning or a LinAlgError."""
+    assert np.isnan(fit_order(x, y)).all()
+
+
+def test_fit_order_skips_unusable_points():
+    """A NaN among four points leaves three on the line y = x: slope 1 (it was NaN)."""
+    assert fit_order([0.1, 0.05, 0.025, 0.01], [0.1, np.nan, 0.025, 0.01])[0] == pytest.approx(1.0)
 
 
 def test_pareto_and_cheapest():
@@ -293,3 +307,77 @@ def test_tolerance_sweep_of_error_controlled_runs(tmp_path):
     assert (ds.nsteps.squeeze().sel(rtol=1e-4) > ds.nsteps.squeeze().sel(rtol=1e-2)).all()
     plotting.tolerance(ds, tmp_path / "tol.png")
     assert os.path.getsize(tmp_path / "tol.png") > 10_000
+
+
+def test_study_whose_first_case_is_refused():
+    """The largest k above the explicit scheme's k_crit (~0.045 on tp5 at h = 0.05) is refused; the study still
+    evaluates (its probe coordinates came from the first case's Dataset, empty when refused: KeyError 'probe_x')."""
+    st = Study("tp5", k=[0.05, 0.001], h=[0.05], scheme="explicit", reference={"k": 0.0005}, T=0.1, workers=0)
+    ds = st.run(progress=False)
+    status = ds.status.squeeze()
+    assert status.sel(k=0.05) == "refused" and status.sel(k=0.001) == "complete"
+    assert np.isnan(ds.error.sel(k=0.05)).all() and np.isfinite(ds.error.sel(k=0.001)).all()
+    np.testing.assert_array_equal(ds.probe_x.values, [p[0] for p in workbench.scene("tp5")["probes"]])
+
+
+def test_k_over_h_does_not_rebuild_the_scene(monkeypatch):
+    """Study.__init__ rebuilt the already checked scene for nothing when k_over_h was given (an unused
+    ``ratio = self.scene.with_()``): no call of Scene.with_ without overrides."""
+    from workbench.scenes import Scene
+
+    calls, real = [], Scene.with_
+
+    def spy(self, **overrides):
+        calls.append(overrides)
+        return real(self, **overrides)
+
+    monkeypatch.setattr(Scene, "with_", spy)
+    st = Study("tp5", h=[0.05, 0.025], k_over_h=0.2, T=0.1, workers=0)
+    assert [c.k for c in st.cases] == [0.2 * 0.05, 0.2 * 0.025]
+    assert calls and {} not in calls
+
+
+def test_couple_any_pair_of_axes():
+    """A coupling of any parameter to any axis, not only k = C h (it was "must depend on h only"): gamma_nu = 0.1 c_nu
+    makes c_nu and gamma_nu the coordinates of ``level`` (not a refinement series: orders are fitted along h, per
+    level); h = 5 k makes k the driver of a refinement series (orders along k, h and h + k)."""
+    st = Study("tp5", h=[0.05, 0.025], sweep={"c_nu": [1.0, 5.0]}, couple={"gamma_nu": lambda c: 0.1 * c["c_nu"]},
+               k=[0.01], T=0.05, reference={"h": 0.0125}, n_compare=2, workers=0)
+    ds = st.run(progress=False)
+    assert ds.error.dims == ("level", "h", "k", "order", "scheme")
+    assert ds.c_nu.values.tolist() == [1.0, 5.0] and ds.gamma_nu.values.tolist() == pytest.approx([0.1, 0.5])
+    assert np.isfinite(ds.error.values).all() and (ds.error.sel(h=0.025) < ds.error.sel(h=0.05)).all()
+    assert np.isfinite(ds.observed_order.sel(norm="error", along="h").values).all()
+    st = Study("tp5", k=[0.02, 0.01], couple={"h": lambda c: 5 * c["k"]}, T=0.05, reference={"k": 0.005, "h": 0.025},
+               n_compare=2, workers=0)
+    assert st.layout.driver == "k" and [c.h for c in st.cases] == [0.1, 0.05]
+    ds = st.run(progress=False)
+    assert ds.error.dims == ("level", "order", "scheme") and ds.h.dims == ("level",)
+    assert np.isfinite(ds.observed_order.sel(norm="error", along="h+k").values).all()
+    with pytest.raises(workbench.ParameterError, match="must each be a function of one swept axis"):
+        Study("tp5", h=[0.05, 0.025], order=[1, 2], couple={"k": lambda c: 0.2 * c["h"] / c["order"]}, T=0.1)
+
+
+def test_overrides_are_checked_with_the_swept_values():
+    """``Study("tp1", k=[1e-6], T=1e-3)`` was refused for the preset's k = 0.01 > T, a value no case uses: the
+    overrides are checked with the axes applied, so the answer is the study's own (one case: nothing to compare), and
+    two steps below T run. Overrides that no case can fix are still refused, naming the parameter, before any work."""
+    with pytest.raises(workbench.ParameterError, match="single case"):
+        Study("tp1", k=[1e-6], T=1e-3)
+    ds = Study("tp1", k=[1e-5, 5e-6], T=1e-3, reference="ode", workers=0).run(progress=False)
+    assert (ds.complete == 1).all() and np.isfinite(ds.error.values).all()
+    st = Study("tp5", h=[0.05, 0.025], k_over_h=0.002, T=1e-3, reference={"h": 0.0125}, workers=0)
+    assert [c.k for c in st.cases] == pytest.approx([1e-4, 5e-5])
+    with pytest.raises(workbench.ParameterError, match="T = -1"):
+        Study("tp1", k=[1e-5, 5e-6], T=-1)
+    with pytest.raises(workbench.ParameterError, match="k = 0.1 is larger than T"):
+        Study("tp1", k=[0.1, 0.05], T=0.01, reference="ode")
+
+
+def test_case_history_abbreviates_long_record_times(tmp_path):
+    """Each case archive's ``history`` is the call that made it; its record_times (501 here, thousands in fine
+    sweeps) were written out in full (10 kB of ``np.float64(...)``): now the ends and the count."""
+    Study("tp1", k=[0.002, 0.001], reference="ode", workers=0).run(tmp_path, progress=False)
+    for path in sorted(tmp_path.glob("*.nc")):
+        history = workbench.load(path).attrs["history"]
+        assert len(history) < 200 and "record_times=[0.0, 0.002, 0.004, ..., 0.998, 1.0] (501 values)" in history

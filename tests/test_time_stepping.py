@@ -240,3 +240,20 @@ def test_k_below_k_min_stops_clearly_and_keeps_the_run():
 def test_error_control_refused_for_the_explicit_scheme():
     with pytest.raises(workbench.ParameterError, match="rtol"):
         workbench.run("tp1", scheme="explicit", rtol=1e-3, progress=False)
+
+
+def test_a_kink_is_charged_against_its_share_of_the_tolerance():
+    """A step inside which a share of the boundary switched law is judged by err / share when that is below the
+    error per unit elapsed time (a kink's first-order error is made once); steps without crossings are not."""
+    from workbench.schemes.base import crossed_fraction
+    from workbench.schemes.stepping import AdaptiveSteps
+
+    steps = AdaptiveSteps(1.0, 0.01, rtol=1e-3, atol=1e-9, k_min=1e-9, k_max=1.0, order=2, t0=0.0)
+    steps.t = 0.5
+    steps.next()  # the step (0.5, 0.51): per unit elapsed time x 51
+    assert steps.per_unit_step(0.02) == pytest.approx(0.02 * 51)
+    assert steps.per_unit_step(0.02, crossed=0.1) == pytest.approx(0.2)
+    assert steps.per_unit_step(1e-4, crossed=1e-4) == pytest.approx(1e-4 * 51)  # a tiny share: no relief
+    before = [(np.array([1.0, 1.0, -1.0, 1.0]), np.array([1.0, 1.0, 1.0, 2.0]))]
+    after = [(np.array([-1.0, 1.0, -2.0, -1.0]), None)]
+    assert crossed_fraction(before, after) == pytest.approx(3 / 5)

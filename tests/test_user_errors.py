@@ -381,6 +381,54 @@ def test_disk_full_at_the_end_keeps_the_result(tmp_path, monkeypatch, capsys):
     assert not list(full.iterdir()), f"left behind in the full folder: {list(full.iterdir())}"
 
 
+#: A command line whose figure and VTK writes fail with a full disk (the archive, if any, is written).
+_FULL_AT_THE_END = """
+import errno, sys
+import matplotlib.figure
+from workbench import vtk
+from workbench.cli import main
+
+def no_space(*args, **kwargs):
+    raise OSError(errno.ENOSPC, "No space left on device")
+
+matplotlib.figure.Figure.savefig = no_space
+vtk._write_vtu = no_space
+sys.exit(main(sys.argv[1:]))
+"""
+
+
+@pytest.mark.parametrize("archive", [True, False], ids=["with -o", "without -o"])
+def test_plot_and_vtk_failing_at_the_end_exit_4_and_say_where_the_result_is(tmp_path, archive):
+    """``--plot`` / ``--vtk`` that cannot be written after the run (disk full) ended in a traceback (exit 1): exit 4
+    (as for ``-o``), one ``error:`` line per failed output naming it and where the result is kept (the archive, or a
+    copy in the temporary folder without ``-o``), which loads as the run."""
+    out = ["-o", "a.nc"] if archive else []
+    p = subprocess.run([sys.executable, "-c", _FULL_AT_THE_END, "run", "tp1", *RUN_TINY, *out, "--plot", "a.png",
+                        "--vtk", "vtk"], cwd=tmp_path, capture_output=True, text=True,
+                       env=dict(os.environ, TMPDIR=str(tmp_path)))
+    lines = [line for line in p.stderr.splitlines() if line.strip()]
+    assert p.returncode == 4 and "Traceback" not in p.stderr, p.stderr
+    assert len(lines) == 2 and lines[0].startswith("error: --plot a.png could not be written"), p.stderr
+    assert lines[1].startswith("error: --vtk vtk could not be written"), p.stderr
+    kept = {re.search(r"the results are kept in (\S+)$", line).group(1) for line in lines}
+    assert len(kept) == 1
+    kept = Path(tmp_path, kept.pop())
+    assert kept == tmp_path / "a.nc" if archive else kept.parent == tmp_path
+    assert workbench.load(kept).attrs["status"] == "complete"
+
+
+def test_reproduce_of_a_diverging_run_exits_3(tmp_path):
+    """A run of ``workbench reproduce`` that diverges (tp1 pulled beyond 10 x its length) ended in a traceback: exit 3
+    as ``workbench run``, one ``error:`` line, and the computed part kept (marked incomplete)."""
+    p = subprocess.run([sys.executable, "-m", "workbench.cli", "reproduce", "tp1", "--no-side", "--out", "r",
+                        "--set", "delta=-0.6 - 100*t"], cwd=tmp_path, capture_output=True, text=True)
+    lines = [line for line in p.stderr.splitlines() if line.strip()]
+    assert p.returncode == 3 and "Traceback" not in p.stderr, p.stderr
+    assert len(lines) == 1 and lines[0].startswith("error: tp1: a displacement of"), p.stderr
+    ds = workbench.load(tmp_path / "r" / "tp1_diverged.nc")
+    assert ds.attrs["status"] == "incomplete" and ds.sizes["time"] > 1
+
+
 # ------------------------------------------------------------------------------------------------------
 # item 11: damaged study cases and stale temporary files
 # ------------------------------------------------------------------------------------------------------
@@ -609,6 +657,35 @@ def test_off_grid_snapshot_is_refused_or_honest(scene, overrides, wanted):
     said = any(str(wanted) in t and any(w in t for w in ("moved", "nearest", "interpolat", "shifted")) for t in texts)
     assert said, (f"snapshot asked at t = {wanted}, stored at {times.tolist()}, and the archive still claims "
                   f"{claimed} without saying that the time was moved")
+
+
+@pytest.mark.parametrize("k", [0.1, 0.01])
+def test_requested_times_on_the_grid_are_kept_exactly(k):
+    """0.3 is on the grid of k = 0.1 only to round-off (3 * 0.1 != 0.3; linspace gives 0.30000000000000004): a snapshot
+    or record asked at 0.3 is there, at exactly 0.3 (``ds.sel(time=0.3)`` works), for k = 0.1 and 0.01."""
+    wanted = [0.1, 0.3, 0.7]
+    ds = workbench.run("tp1", k=k, h=0.1, snapshots=wanted, record_times=wanted, progress=False)
+    assert ds.time.values.tolist() == [0.0] + wanted + [1.0]
+    assert ds.snapshot_time.values.tolist() == wanted + [1.0]
+    assert float(ds.u_probe.sel(time=0.3).isel(probe=0, component=0)) != 0.0
+
+
+def test_requested_times_off_a_given_grid_are_refused():
+    """With a user grid (``times=``) a snapshot or record time off it was dropped silently, and a grid that ends before
+    T lost the final snapshot (an AttributeError): both are ParameterErrors naming ``times`` before any work, as is a
+    record time after T."""
+    grid = [0.0, 0.1, 0.3, 0.7, 1.0]
+    with pytest.raises(ParameterError, match=r"times: the snapshot or record time 0\.5 is not on the given grid"):
+        workbench.run("tp1", times=grid, snapshots=(0.5,), progress=False)
+    with pytest.raises(ParameterError, match=r"times: the snapshot or record time 0\.5"):
+        workbench.run("tp1", times=grid, snapshots=(), record_times=[0.5], progress=False)
+    with pytest.raises(ParameterError, match="times: the grid ends at 0.7, not at T = 1"):
+        workbench.run("tp1", times=grid[:-1], snapshots=(), progress=False)
+    with pytest.raises(ParameterError, match="record time 1.5 is outside the run"):
+        workbench.run("tp1", k=0.1, record_times=[0.5, 1.5], progress=False)
+    ds = workbench.run("tp1", h=0.1, times=np.arange(0.0, 1.05, 0.1), snapshots=(0.3, 0.7), record_times=[0.3],
+                       progress=False)
+    assert ds.time.values.tolist() == [0.0, 0.3, 1.0] and ds.snapshot_time.values.tolist() == [0.3, 0.7, 1.0]
 
 
 def test_toml_traction_table_conflicts_with_parameters(tmp_path):

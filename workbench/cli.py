@@ -94,6 +94,12 @@ def _threads(value):
 
 def write_or_keep(ds, path) -> int:
     """Write ``ds``; if that fails (a full disk), keep it in the temporary folder and say where. Exit code."""
+    return _write_or_keep(ds, path)[0]
+
+
+def _write_or_keep(ds, path=None):
+    """(exit code, where ``ds`` now is): ``path`` written, or a copy in the temporary folder (``path`` None: only
+    there), or None when that failed too; a failure is one ``error:`` line."""
     import tempfile
     from datetime import datetime
     from pathlib import Path
@@ -101,21 +107,45 @@ def write_or_keep(ds, path) -> int:
     from . import results
     from .files import safe_name
 
-    try:
-        results.write(ds, path)
-        return 0
-    except OSError as err:
-        stamp = datetime.now().strftime("%Y%m%d-%H%M%S")
-        keep = Path(tempfile.gettempdir()) / f"workbench-kept-{safe_name(ds.attrs.get('scene', 'run'))}-{stamp}.nc"
+    err = None
+    if path is not None:
         try:
-            results.write(ds, keep)
-        except OSError as err2:
-            print(_one_line(f"error: {path} could not be written ({err.strerror or err}); keeping the result in "
-                            f"{keep} failed too ({err2.strerror or err2})"), file=sys.stderr)
-            return EXIT_NOT_WRITTEN
-        print(_one_line(f"error: {path} could not be written ({err.strerror or err}); the result is kept in {keep}"),
+            results.write(ds, path)
+            return 0, path
+        except OSError as e:
+            err = e
+    stamp = datetime.now().strftime("%Y%m%d-%H%M%S")
+    keep = Path(tempfile.gettempdir()) / f"workbench-kept-{safe_name(ds.attrs.get('scene', 'run'))}-{stamp}.nc"
+    what = f"{path} could not be written ({err.strerror or err}); " if err is not None else ""
+    try:
+        results.write(ds, keep)
+    except OSError as err2:
+        print(_one_line(f"error: {what}keeping the result in {keep} failed too ({err2.strerror or err2})"),
               file=sys.stderr)
-        return EXIT_NOT_WRITTEN
+        return EXIT_NOT_WRITTEN, None
+    if err is not None:
+        print(_one_line(f"error: {what}the result is kept in {keep}"), file=sys.stderr)
+    return (EXIT_NOT_WRITTEN if err is not None else 0), keep
+
+
+def _write_extras(ds, outputs, kept) -> int:
+    """Write the figures and files after the archive: ``outputs`` is a list of (option, path, write(path) -> text).
+
+    A write that fails (disk full, folder gone) is one ``error:`` line saying where the results are kept (the
+    archive, else a copy made now in the temporary folder); the others are still written. Exit code.
+    """
+    code = 0
+    for option, path, write in outputs:
+        try:
+            print(write(path))
+        except OSError as err:
+            if kept is None:
+                _, kept = _write_or_keep(ds)
+            where = f"the results are kept in {kept}" if kept is not None else "the results could not be kept"
+            print(_one_line(f"error: {option} {path} could not be written ({err.strerror or err}); {where}"),
+                  file=sys.stderr)
+            code = EXIT_NOT_WRITTEN
+    return code
 
 
 def cmd_scenes(args) -> int:
@@ -160,21 +190,30 @@ def cmd_run(args) -> int:
         print(_one_line(f"error: {err}"), file=sys.stderr)
         ds, code = err.dataset, EXIT_DIVERGED
     print(_status_line(ds))
+    kept = None
     if args.output:
-        written = write_or_keep(ds, args.output)
+        written, kept = _write_or_keep(ds, args.output)
         if written == 0:
             print(f"wrote {args.output}" + (" (incomplete: see attrs 'failure')" if code else ""))
         code = code or written
+    outputs = []
     if args.plot:
-        from . import plotting
+        def plot(path):
+            from . import plotting
 
-        plotting.overview(ds, args.plot)
-        print(f"wrote {args.plot}")
+            plotting.overview(ds, path)
+            return f"wrote {path}"
+
+        outputs.append(("--plot", args.plot, plot))
     if args.vtk:
-        from . import vtk
+        def vtk_files(path):
+            from . import vtk
 
-        files = vtk.export(ds, args.vtk)
-        print(f"wrote {len(files)} VTK files to {args.vtk}/ (open the .pvd in ParaView)")
+            return f"wrote {len(vtk.export(ds, path))} VTK files to {path}/ (open the .pvd in ParaView)"
+
+        outputs.append(("--vtk", args.vtk, vtk_files))
+    extras = _write_extras(ds, outputs, kept)  # written whatever the code so far (a diverged run is plotted too)
+    code = code or extras
     if not args.output and not args.plot:
         print(_summary(ds))
     return code
@@ -223,9 +262,9 @@ def cmd_study(args) -> int:
                workers=args.workers, client=args.scheduler, **given, **overrides)
     archive = Path(args.output + ".cases") if args.output else None
     ds = st.run(archive, progress=False if args.no_progress else None)
-    code = 0
+    code, kept = 0, None
     if args.output:
-        code = write_or_keep(ds, args.output)
+        code, kept = _write_or_keep(ds, args.output)
         if code == 0:
             print(f"wrote {args.output} (cases in {archive}/)")
     for norm in ("error", "error_V", "error_Q", "error_beta", "error_beta_end"):
@@ -238,35 +277,48 @@ def cmd_study(args) -> int:
     if o["new_cases"]:
         print(f"study: {o['execute']:.1f} s running {o['new_cases']} new case(s) (their own setup + time loops, "
               f"summed over workers: {o['cases']:.1f} s), {o['evaluate']:.1f} s comparing fields")
-    if args.plot:
-        from . import plotting
+    outputs = []
+    for option, path, draw in (("--plot", args.plot, "convergence"), ("--pareto", args.pareto, "pareto")):
+        if path:
+            def write(p, draw=draw):
+                from . import plotting
 
-        plotting.convergence(ds, args.plot)
-        print(f"wrote {args.plot}")
-    if args.pareto:
-        from . import plotting
+                getattr(plotting, draw)(ds, p)
+                return f"wrote {p}"
 
-        plotting.pareto(ds, args.pareto)
-        print(f"wrote {args.pareto}")
-    return code
+            outputs.append((option, path, write))
+    extras = _write_extras(ds, outputs, kept)
+    return code or extras
 
 
 def cmd_reproduce(args) -> int:
     import time
+    from pathlib import Path
 
+    from .errors import Diverged
     from .files import check_output
     from .paper import reproduction
 
     check_output(args.out, "--out", folder=True)
     overrides = _overrides(args, swept=("h", "k"))
     problems = reproduction.PROBLEMS if args.problem == "all" else (args.problem,)
+    code = 0
     for problem in problems:
         t0 = time.perf_counter()
-        result = reproduction.reproduce(problem, args.out, h=args.h, k=args.k, side=not args.no_side, vtk=args.vtk,
-                                        **overrides)
+        try:
+            result = reproduction.reproduce(problem, args.out, h=args.h, k=args.k, side=not args.no_side,
+                                            vtk=args.vtk, **overrides)
+        except Diverged as err:  # as `workbench run`: say so, keep what was computed, exit 3 (after the others)
+            print(_one_line(f"error: {err}"), file=sys.stderr)
+            if err.dataset is not None:
+                written, where = _write_or_keep(err.dataset, Path(args.out) / f"{problem}_diverged.nc")
+                if written == 0:
+                    print(f"  wrote {where} (incomplete: see attrs 'failure')\n")
+            code = EXIT_DIVERGED
+            continue
         print(reproduction.report(problem, result))
         print(f"  wrote {len(result['files'])} files to {args.out} ({time.perf_counter() - t0:.1f} s)\n")
-    return 0
+    return code
 
 
 def _add_scene_args(p, run_options=True):
@@ -331,12 +383,13 @@ def main(argv=None) -> int:
     from .results import invocation
 
     argv = sys.argv[1:] if argv is None else list(argv)
+    token = None
     with warnings.catch_warnings():
         warnings.simplefilter("default", RuntimeWarning)
         warnings.showwarning = _show_warning
         try:
             args = build_parser().parse_args(argv)
-            invocation.set(shlex.join(["workbench"] + argv))
+            token = invocation.set(shlex.join(["workbench"] + argv))
             return args.func(args)
         except ParameterError as err:
             print(_one_line(f"error: {err}"), file=sys.stderr)
@@ -344,6 +397,9 @@ def main(argv=None) -> int:
         except KeyboardInterrupt:
             print("error: interrupted", file=sys.stderr)
             return 130
+        finally:  # main() called in a session (a notebook, a test): later library calls are not this command
+            if token is not None:
+                invocation.reset(token)
 
 
 if __name__ == "__main__":  # pragma: no cover

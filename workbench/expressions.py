@@ -1,6 +1,6 @@
 """Safe expressions in x, y, z, t for loads and prescribed displacements.
 
-The grammar (SPEC): numbers, the variables ``x y z t``, ``pi``, the operators
+The grammar (docs/conventions.md): numbers, the variables ``x y z t``, ``pi``, the operators
 ``+ - * / **`` (``^`` is read as ``**``), parentheses, the functions
 ``sin cos tan exp log sqrt abs`` and ``ifpos(a, b, c)`` (``b`` where ``a > 0``,
 else ``c``). A vector is a parenthesised tuple ``(fx, fy)``. Text is parsed

@@ -24,9 +24,12 @@ Examples
 """
 from __future__ import annotations
 
-import ngsolve as ngs
+from typing import TYPE_CHECKING
 
 from .errors import ParameterError
+
+if TYPE_CHECKING:  # NGSolve is imported where a mesh is made: a scene is checked without it
+    import ngsolve as ngs
 
 
 class Geometry:
@@ -168,6 +171,7 @@ class Block(Geometry):
         return ((0.25 * W, D / 2, 0.0), (0.5 * W, D / 2, 0.0), (0.75 * W, D / 2, 0.0), (W, D / 2, 0.0), (W, D / 2, H))
 
     def mesh(self):
+        import ngsolve as ngs
         from ngsolve.meshes import MakeStructured3DMesh
 
         W, D, H = self.extent

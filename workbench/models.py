@@ -90,7 +90,7 @@ def _viscous(v, dim):
         return kelvin_voigt.Scalar(v["b"])
     if v.get("viscous_tensor"):
         return kelvin_voigt.Voigt(v["viscous_tensor"], dim, "viscous_tensor")
-    return kelvin_voigt.Isotropic(v["a1"], v["a2"])
+    return kelvin_voigt.Isotropic(v["a1"], v["a2"], plane_strain=dim == 2 and v.get("plane", "stress") == "strain")
 
 
 def _loads(values, geometry) -> Loads:

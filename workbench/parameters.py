@@ -1,4 +1,4 @@
-"""Every scene parameter: its name (as in SPEC), default, unit, meaning and allowed range.
+"""Every scene parameter: its name (as in docs/conventions.md), default, unit, meaning and allowed range.
 
 This table is the single place where a parameter is defined. Scenes pick the
 names their geometry and model use; values are coerced (text from the command

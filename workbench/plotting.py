@@ -123,7 +123,7 @@ def overview(ds, path=None):
 
 def _series(study_ds):
     """(along, x, series dims, other dims) of a study Dataset's convergence plot."""
-    if "level" in study_ds.dims:
+    if "level" in study_ds.dims and ("level" in study_ds.h.dims or "level" in study_ds.k.dims):  # k = C h: refining
         return "h+k", study_ds.h.values + study_ds.k.values, ["level"], None
     along = "h" if study_ds.sizes.get("h", 1) > 1 else "k"
     return along, study_ds[along].values, [along], {d: -1 for d in ("h", "k") if d != along and d in study_ds.dims}

@@ -1,6 +1,6 @@
 """The result Dataset: its schema (one place), how a run fills it, and netCDF archiving.
 
-Schema (SPEC contract, extended):
+Schema (docs/conventions.md, the result Dataset):
 
 ========================================  =====================================================
 ``time``                                  recorded times [s]; ``step`` holds the step index
@@ -182,15 +182,13 @@ class Recorder:
 
     def snapshot(self, t: float, scheme) -> None:
         """Keep the whole field: u, the P0 stress sigma_h = P_Q[...] and its von Mises norm."""
-        from .physics.kelvin_voigt import von_mises_cells
+        from .physics.kelvin_voigt import stress_and_von_mises
 
         d = self.disc
-        stress = None
-        for tensor, vector in scheme.stress_parts():
-            part = tensor.apply(d.cell_strains(vector))
-            stress = part if stress is None else stress + part
+        stress, vm = stress_and_von_mises([(tensor, d.cell_strains(vector)) for tensor, vector in scheme.stress_parts()],
+                                          d.dim)
         edges = d.edge_values() if d.scene["order"] > 1 else None
-        self.snaps.append((t, d.u.vec.FV().NumPy().copy(), stress, von_mises_cells(stress, d.dim), edges))
+        self.snaps.append((t, d.u.vec.FV().NumPy().copy(), stress, vm, edges))
 
     def dataset(self, attrs: dict) -> xr.Dataset:
         """The Dataset of everything recorded so far (``attrs`` already netCDF-safe)."""
@@ -255,6 +253,27 @@ def mesh_cells(mesh, dim):
 
 #: The command or call that is making the current result (set by the command line; else the Python call).
 invocation: contextvars.ContextVar = contextvars.ContextVar("invocation", default=None)
+
+
+def brief(value, head: int = 3, tail: int = 2) -> str:
+    """The repr of a value for a ``history`` line: a long sequence (a study's record times) by its ends and count.
+
+    Examples
+    --------
+    >>> brief([0.0, 0.1])
+    '[0.0, 0.1]'
+    >>> brief(np.linspace(0.0, 1.0, 1001))
+    '[0.0, 0.001, 0.002, ..., 0.999, 1.0] (1001 values)'
+    """
+    if isinstance(value, np.ndarray):
+        value = value.tolist()
+    if isinstance(value, (list, tuple)):
+        items = [v.item() if isinstance(v, np.generic) else v for v in value]  # 0.5, not np.float64(0.5)
+        if len(items) > head + tail + 1:
+            ends = [repr(v) for v in items[:head]] + ["..."] + [repr(v) for v in items[-tail:]]
+            return f"[{', '.join(ends)}] ({len(items)} values)"
+        return repr(items if isinstance(value, list) else tuple(items))
+    return repr(value.item() if isinstance(value, np.generic) else value)
 
 #: Units of the non-parameter attributes a run writes.
 ATTR_UNITS = {"h_max": "m", "k_actual": "s", "k_crit": "s", "setup_time": "s", "wall_time": "s", "cpu_time": "s",

@@ -44,7 +44,8 @@ def run(scene, *, progress=None, record_times=None, times=None, limit=None, thre
         Times to record (the step controller lands on them). Default: every step, thinned
         to about 2000 records for longer runs (error-controlled runs: 20000); t = 0 and T always.
     times : sequence of float, optional
-        A non-uniform time grid (overrides ``k``).
+        A non-uniform time grid (overrides ``k``): from 0 to T, containing every snapshot
+        and record time (else a ParameterError; without it the grid is made to contain them).
     limit : float, optional
         Displacement (max over dofs) beyond which the run is stopped as diverged
         (default: 10 x the body's largest extent).
@@ -72,6 +73,8 @@ def run(scene, *, progress=None, record_times=None, times=None, limit=None, thre
             if hint:
                 raise ParameterError(f"unknown option {key!r} of workbench.run{hint}")
     sc = scenes.scene(scene, **overrides)
+    if limit is not None and (isinstance(limit, bool) or not isinstance(limit, (int, float)) or not limit > 0):
+        raise ParameterError(f"limit = {limit!r}: give the displacement bound in m, a number > 0")
     if threads is not None and (isinstance(threads, bool) or not isinstance(threads, int) or threads < 1):
         raise ParameterError(f"threads = {threads!r}: give an integer >= 1 (NGSolve TaskManager threads)")
     sync = tuple(sc["snapshots"]) + (tuple(record_times) if record_times is not None else ())
@@ -82,9 +85,9 @@ def run(scene, *, progress=None, record_times=None, times=None, limit=None, thre
     model = model or sc.model_of()
     preflight.resources(sc, model, len(grid) - 1)
     given = [repr(scene if isinstance(scene, str) else getattr(scene, "name", scene))]
-    given += [f"{k}={v!r}" for k, v in overrides.items()]
-    given += [f"{k}={v!r}" for k, v in (("record_times", record_times), ("times", times), ("limit", limit),
-                                        ("threads", threads)) if v is not None]
+    given += [f"{k}={results.brief(v)}" for k, v in overrides.items()]
+    given += [f"{k}={results.brief(v)}" for k, v in (("record_times", record_times), ("times", times),
+                                                     ("limit", limit), ("threads", threads)) if v is not None]
     call = f"workbench.run({', '.join(given)})"
     with blas_single_threaded():
         return _run(sc, model, grid, record_times, progress, limit, threads, call)
@@ -109,11 +112,13 @@ def _run(sc, model, grid, record_times, progress, limit, threads, call):
     recorder = results.Recorder(disc, sc["T"], sc["snapshots"], record_times,
                                 MAX_RECORDS_ADAPTIVE if adaptive else MAX_RECORDS, every_step=adaptive)
     if limit is None:
-        limit = 10.0 * model.geometry.size
+        limit, origin = 10.0 * model.geometry.size, "10 x the body's largest extent, the default limit"
+    else:
+        origin = f"limit = {limit:g} m, as given"
     failure = None
     with results.Clock() as clock, task_manager(threads):
         try:
-            march(disc, scheme, steps, recorder, progress=progress, limit=limit)
+            march(disc, scheme, steps, recorder, progress=progress, limit=limit, limit_origin=origin)
         except Diverged as err:
             failure = err
     g = model.geometry

@@ -12,7 +12,7 @@ A coarse run's fields are carried onto the fine run's mesh:
   facet midpoint is located in the coarse mesh and takes that cell's value
   (exact on nested meshes).
 
-Norms (SPEC, Corollary 6.7): |u|_V = ||eps(u)||_L2(Omega), |sigma|_Q = ||sigma||_L2
+Norms (docs/models.md; Corollary 6.7 of the 2003 paper): |u|_V = ||eps(u)||_L2(Omega), |sigma|_Q = ||sigma||_L2
 (Frobenius), |beta|_L2(Gamma_3), evaluated on the fine mesh.
 """
 from __future__ import annotations

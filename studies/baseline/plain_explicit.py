@@ -2,7 +2,7 @@
 
 A speed and correctness baseline written independently of ``workbench``:
 nothing here imports the package or NGSolve. It solves Model A of
-``shared/SPEC.md`` (Chau–Fernández–Shillor–Sofonea 2003, test problem 5 by
+``docs/models.md`` (Chau–Fernández–Shillor–Sofonea 2003, test problem 5 by
 default) with the fully discrete scheme of the paper (eqs. 6.9–6.12 / 7.1–7.4).
 
 Problem

@@ -26,7 +26,7 @@ from workbench.study import Study
 SMALL = os.environ.get("WORKBENCH_NOTEBOOK_SMALL") == "1"
 
 # %% [markdown]
-# Test problem 1 against its exact solution (SPEC): a k-sweep, in this process (`workers=0`).
+# Test problem 1 against its exact solution (docs/models.md): a k-sweep, in this process (`workers=0`).
 
 # %%
 rod = Study("tp1", k=[0.04, 0.02, 0.01] if SMALL else [0.04, 0.02, 0.01, 0.005, 0.0025], reference="ode", workers=0)

@@ -74,7 +74,7 @@ PAPER = {
         "symmetric_beta_min": "- (paper uses tension-only behaviour)",
     },
     "tp4": {
-        "beta_end_T": "Fig. 15 axis 0.965-1.005 (SPEC reads ~0.986)",
+        "beta_end_T": "Fig. 15 axis 0.965-1.005 (the model statement expected ~0.986, docs/choices.md)",
         "exp_prediction": "- (inferred data: e^{-gamma L^2 t})",
         "uy_tip_T": "-",
         "uy_end_T": "Fig. 14 axes 0..1.6",

@@ -36,12 +36,15 @@ class ContactTerm:
     """One contact law. Subclasses implement the parts they need (defaults: no traction).
 
     Class attributes: ``name`` (as listed in a run's ``terms``), ``rank`` (order of
-    summation), ``tangential`` (acts on u_tau), ``uses_beta`` (needs the bonding field),
-    ``parameters`` (the :class:`workbench.parameters.Param` rows it adds to the table).
+    summation), ``side`` (where its normal slope can be non-zero: ``"compression"``,
+    u_nu > 0, or ``"tension"``, u_nu < 0), ``tangential`` (acts on u_tau), ``uses_beta``
+    (needs the bonding field), ``parameters`` (the :class:`workbench.parameters.Param`
+    rows it adds to the table).
     """
 
     name = ""
     rank = 100
+    side = "compression"
     tangential = False
     uses_beta = False
     parameters: tuple = ()
@@ -118,9 +121,20 @@ class Contact:
         return sum((t.tangential_slope(NP, u_tau, beta) for t in self.terms), eye)
 
     def max_slope(self, beta0: float) -> tuple[float, float]:
-        """Largest (normal, tangential) spring over the terms (each term acts alone where it acts)."""
-        slopes = [t.max_slope(beta0) for t in self.terms] or [(0.0, 0.0)]
-        return max(s[0] for s in slopes), sum(s[1] for s in slopes)
+        """Largest (normal, tangential) spring of the sum of the terms, for states with beta <= beta0.
+
+        Terms on the same side of u_nu = 0 can be steep at the same state (the linear
+        and the power-law pull both at u_nu = -L), so their slopes add; the two sides
+        never overlap (gap >= 0), so the normal spring is the larger side's sum. Every
+        tangential term acts everywhere: their slopes add.
+        """
+        normal = {}
+        tangential = 0.0
+        for t in self.terms:
+            s_nu, s_tau = t.max_slope(beta0)
+            normal[t.side] = normal.get(t.side, 0.0) + s_nu
+            tangential += s_tau
+        return max(normal.values(), default=0.0), tangential
 
     def integrand(self, u_nu, u_tau, beta, w_nu, w_tau):
         """The NGSolve integrand of j(beta, u, w) (None when no term gives a traction)."""

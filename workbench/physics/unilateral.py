@@ -11,7 +11,7 @@ node's share of the contact side (lumped boundary quadrature). Four states:
     rigid      s = g        lam >= w (F + c g)
 
 Equivalently s = prox(s + rho lam / w) for any rho > 0 with the piecewise
-linear map of SPEC; its branches are the states, which makes a primal-dual
+linear map of docs/models.md; its branches are the states, which makes a primal-dual
 active set (semismooth Newton) iteration exact once the states are right.
 
 Examples

@@ -1,8 +1,8 @@
 """Rod references: exact formulas and ODE/Volterra solves of the 1D problems, independent of the schemes.
 
-* :func:`tp1_exact` — Test Problem 1 in closed form (SPEC, corrected exponents).
+* :func:`tp1_exact` — Test Problem 1 in closed form (corrected exponents: docs/choices.md).
 * :func:`rod_ode` — any rod scene with u0 = delta(0) reduces to an ODE for the
-  end strain A(t) and beta(t) (SPEC, Appendix A of the paper), integrated here
+  end strain A(t) and beta(t) (docs/models.md, Appendix A of the paper), integrated here
   with SciPy's Radau method to tight tolerance.
 * :func:`rod_memory` — a Model B rod scene: the scalar Volterra inclusion solved by
   :mod:`workbench.references.volterra` (Prony kernels: an ODE for the memory variables; a general
@@ -20,6 +20,8 @@ Examples
 from __future__ import annotations
 
 import numpy as np
+
+from ..errors import ParameterError
 
 
 class RodSolution:
@@ -55,7 +57,7 @@ def tp1_exact():
     """u(x, t) and beta(t) of Test Problem 1: beta = exp(-0.027 t), u = 0.09513 (e^{-0.054 t} - e^{-t}) x - 0.6.
 
     The constants follow from the reduced ODE A' + A = gamma L beta^2,
-    beta' = -gamma L^2 beta with gamma = L = 0.3 (SPEC): 0.027 = gamma L^2,
+    beta' = -gamma L^2 beta with gamma = L = 0.3 (docs/models.md): 0.027 = gamma L^2,
     0.054 = 2 gamma L^2, 0.09513 = gamma L / (1 - 2 gamma L^2).
     """
     gamma, L = 0.3, 0.3
@@ -93,10 +95,17 @@ def rod_ode(scene, rtol=1e-11, atol=1e-13, model=None):
     delta, ell = loads.delta, model.geometry.extent[0]
     if not np.allclose(loads.u0(x=np.linspace(0, ell, 7)), delta(t=0.0)):
         raise ValueError("rod_ode needs u0 = delta(0) (constant): only then is u linear in x")
-    terms = {t.name.split("_")[0]: t for t in model.contact.terms}
-    unknown = set(terms) - {"compliance", "adhesion"}
+    known = {"compliance": "compliance", "adhesion": "adhesion", "adhesion_flipped": "adhesion"}
+    unknown = [t for t in model.contact.terms if t.name not in known]
     if unknown:
-        raise ValueError(f"rod_ode knows the compliance and the adhesive pull only, not {sorted(unknown)}")
+        # name the term and the parameters that declare it, so the user knows what to switch off
+        what = "; ".join(f"{t.name!r}" + (f" (its parameters {', '.join(p.name for p in t.parameters)})"
+                                           if t.parameters else "") for t in unknown)
+        raise ParameterError(f"the rod reference 'ode' (rod_ode) solves the rod with the normal compliance (c_nu, "
+                             f"m_nu, gap) and the adhesive pull (gamma_nu, L) only; it cannot handle the contact term "
+                             f"{what}: switch it off, or compare with a finer run (reference = 'finest' or "
+                             "{'k': ...})")
+    terms = {known[t.name]: t for t in model.contact.terms}
     a, b = model.elastic.modulus, model.viscous.modulus
     comp, pull, law = terms.get("compliance"), terms.get("adhesion"), model.bonding
     c_nu, m_nu, g = (comp.c_nu, comp.m_nu, comp.gap) if comp else (0.0, 1.0, 0.0)

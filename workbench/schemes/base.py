@@ -193,7 +193,10 @@ class Scheme:
         return self._free_dofs
 
     def event(self, start: dict):
-        return None
+        """(theta, crossed): where in the last step to land on a kink (None: nowhere) and the largest share of
+        the boundary whose laws switched inside it (0: none; a kink makes a predictor-based estimate first order
+        there, see :meth:`workbench.schemes.stepping.AdaptiveSteps.per_unit_step`)."""
+        return None, 0.0
 
     # -- what is recorded ---------------------------------------------------------------------------------
     def diagnostics(self) -> dict:
@@ -263,6 +266,20 @@ def first_event(before, after):
     return min(thetas) if thetas else None
 
 
+def crossed_fraction(before, after) -> float:
+    """The largest share (by weight) of one group of switching functions that changed sign over the step (0: none).
+
+    >>> crossed_fraction([(np.array([1.0, 1.0, 1.0, 1.0]), np.ones(4))], [(np.array([-1.0, 1.0, 1.0, 1.0]), None)])
+    0.25
+    """
+    out = 0.0
+    for (b, w), (a, _) in zip(before, after):
+        if b.size:
+            crossed = (b * a < 0) | ((a == 0) & (b != 0))
+            out = max(out, float(np.sum(w[crossed]) / np.sum(w)))
+    return out
+
+
 class KelvinVoigtScheme(Scheme):
     """Model A's shared parts: the stress A eps(v) + G eps(u - lag v), the bonding-resolution check, the kinks."""
 
@@ -322,5 +339,6 @@ class KelvinVoigtScheme(Scheme):
         return groups
 
     def event(self, start: dict):
-        return first_event(self.switching(start["u"], start["beta"]),
-                           self.switching(self.d.u.vec.FV().NumPy(), self._beta()))
+        before = self.switching(start["u"], start["beta"])
+        after = self.switching(self.d.u.vec.FV().NumPy(), self._beta())
+        return first_event(before, after), crossed_fraction(before, after)

@@ -325,10 +325,12 @@ class MemoryVI(Scheme):
         return [(s, self.w), (s - self.layer.g, self.w), (lam / self.w - self.layer.F, self.w)]
 
     def event(self, start: dict):
+        """Where to land on a state change; the crossed share is 0: the estimate (a pair of memory rules) does
+        not see the kinks of u."""
         if not self.C.size:
-            return None
+            return None, 0.0
         return first_event(self.switching(start["u"], start["extra"]["lam"]),
-                           self.switching(self.d.u.vec.FV().NumPy(), self.lam))
+                           self.switching(self.d.u.vec.FV().NumPy(), self.lam)), 0.0
 
     def _active_set(self, s_free, time):
         """Primal-dual active set on the contact nodes, from the previous step's states.

@@ -51,7 +51,8 @@ class Study:
         e.g. ``[{"scheme": ["implicit"], "k": [0.02, 0.01]}, {"scheme": ["explicit"], "k": [5e-4]}]``.
     couple : dict, optional
         Parameters computed from each case's values, e.g. ``{"k": lambda c: 0.2 * c["h"]}``
-        (``k_over_h`` is this coupling); they must depend on the first axis only.
+        (``k_over_h`` is this coupling), or ``{"gamma_nu": lambda c: 0.1 * c["c_nu"]}``; each must be a
+        function of one axis, the same for all.
     reference : str, dict, object or None
         ``"finest"`` (default: the finest case, then not reported as a case), ``"ode"``/``"exact"``
         (rod scenes: :func:`workbench.references.rod_reference`), a dict of discretisation
@@ -72,7 +73,6 @@ class Study:
 
     def __init__(self, scene, *, h=None, k=None, k_over_h=None, order=None, scheme=None, sweep=None, grids=None,
                  couple=None, reference="finest", measures=None, n_compare=10, workers=2, client=None, **overrides):
-        self.scene = scenes.scene(scene, **overrides)
         base = {name: value for name, value in (("h", h), ("k", k), ("order", order), ("scheme", scheme))
                 if value is not None}
         for name in sweep or {}:
@@ -83,14 +83,15 @@ class Study:
         if k_over_h is not None:
             if k is not None or "k" in couple:
                 raise ParameterError("give either k or k_over_h, not both")
-            ratio = self.scene.with_()  # noqa: F841 (the scene is already checked)
             if isinstance(k_over_h, bool) or not isinstance(k_over_h, (int, float)) or not k_over_h > 0 \
                     or not np.isfinite(k_over_h):
                 raise ParameterError(f"k_over_h = {k_over_h!r} must be a number > 0")
             c = float(k_over_h)
             couple["k"] = lambda values: c * values["h"]
         self.coupled = tuple(couple)
-        self.cases, self.axes = expand(self.scene, [dict(base, **g) for g in grids] if grids else [base], couple)
+        union = [dict(base, **g) for g in grids] if grids else [base]
+        self.scene = _base_scene(scene, overrides, union[0], couple)
+        self.cases, self.axes = expand(self.scene, union, couple)
         self.n_compare = positive_int("n_compare", n_compare)
         self.workers = positive_int("workers", workers, lower=0)
         self.client = client
@@ -241,9 +242,11 @@ class Study:
                         r = ref_measures[rc][n]
                         row[f"rel_error_{n}"] = abs(v - r) / abs(r) if r != 0 else np.nan
             rows[case] = row
-        first = runs[self.listed[0]]
-        probe_coords = {f"probe_{c}": ("probe", first[f"probe_{c}"].values) for c in ("x", "y", "z")[: self.scene.dim]}
-        ds = evaluate.dataset(self.layout, rows, first.sizes["probe"], probe_coords, self.scene.dim)
+        # the probes from the case's scene, not its run: a refused case has no Dataset to read them from
+        dim = self.scene.dim
+        probes = np.asarray(self.scene_of(self.listed[0])["probes"], dtype=float).reshape(-1, dim)
+        probe_coords = {f"probe_{c}": ("probe", probes[:, i]) for i, c in enumerate(("x", "y", "z")[:dim])}
+        ds = evaluate.dataset(self.layout, rows, len(probes), probe_coords, dim)
         ds["compare_time"] = ("compare", np.asarray(compare), {"units": "s",
                                                                "long_name": "times at which fields are compared"})
         for name in ds.coords:
@@ -272,14 +275,14 @@ class Study:
                      at_least: bool = False, max_error: float | None = None, **selection) -> None:
         """Check the fitted order(s): |order - expected| <= tol (or order >= expected - tol with ``at_least``).
 
-        ``along`` defaults to "h+k" for coupled sweeps, else the swept refinement axis.
+        ``along`` defaults to "h+k" for coupled refinement sweeps (k = C h), else the swept refinement axis.
         ``max_error`` caps the smallest error, so a wrong constant cannot hide behind a good slope.
         ``selection`` picks some of the cases (e.g. ``order=2``); by default every fitted order is checked.
         """
         ds = self.dataset
         if ds is None:
             raise RuntimeError("run the study first")
-        along = along or ("h+k" if self.coupled else ("h" if len(self.hs) > 1 else "k"))
+        along = along or ("h+k" if self.layout.refining else ("h" if len(self.hs) > 1 else "k"))
         if selection:
             ds = ds.sel(selection)
         rates = ds.observed_order.sel(norm=norm, along=along).values.ravel()
@@ -299,13 +302,42 @@ class Study:
         return cheapest(self.dataset, tolerance, error=error, cost=cost)
 
 
+def _base_scene(scene, overrides, grid, couple):
+    """The study's scene: ``overrides`` checked together with the axis values of a case.
+
+    The scene's own values of the swept and coupled parameters are replaced in every case, so they
+    need not agree with the overrides (``T=1e-3`` with the preset's k = 0.01, while k is swept
+    below T): when the overrides alone are refused, they are checked with the first case's values
+    instead, and a refusal then is that case's (every case is checked again in :func:`expand`).
+    """
+    try:
+        return scenes.scene(scene, **overrides)
+    except ParameterError as alone:
+        first = {}
+        for name, values in grid.items():
+            if isinstance(values, (str, bytes)) or not hasattr(values, "__iter__"):
+                values = [values]
+            values = list(values)
+            if not values:
+                raise alone from None
+            first[name] = values[0]
+        try:
+            own = scenes.scene(scene)  # the scene's values of the axes not swept, for the couplings
+            names = list(BASE_AXES) + [n for n in first if n not in BASE_AXES]
+            values = {n: first[n] if n in first else own[n] for n in names if n not in couple}
+            coupled = {n: rule(dict(values)) for n, rule in couple.items()}
+        except Exception:  # noqa: BLE001 (a bad axis or coupling is reported by expand, naming it)
+            raise alone from None
+        return scenes.scene(scene, **(dict(overrides) | first | coupled))
+
+
 def _history(study) -> str:
     from datetime import datetime, timezone
 
-    from ..results import invocation
+    from ..results import brief, invocation
 
     stamp = datetime.now(timezone.utc).strftime("%Y-%m-%dT%H:%M:%SZ")
-    axes = ", ".join(f"{k}={v!r}" for k, v in study.axes.items() if len(v) > 1)
+    axes = ", ".join(f"{k}={brief(v)}" for k, v in study.axes.items() if len(v) > 1)
     return f"{stamp} {invocation.get() or f'workbench.Study({study.scene.name!r}, {axes})'}"
 
 

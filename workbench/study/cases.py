@@ -96,7 +96,11 @@ class Case:
 
 def _values(name, values) -> list:
     """A sweep axis as a list: a sequence of values or a single value; text is refused (it would be read
-    character by character)."""
+    character by character), but for a choice (``scheme="explicit"``), where it is one value."""
+    from ..parameters import PARAMETERS
+
+    if isinstance(values, str) and name in PARAMETERS and PARAMETERS[name].kind == "choice":
+        values = [values]
     if isinstance(values, (str, bytes)):
         raise ParameterError(f"{name} = {values!r}: give the values to sweep as a list, e.g. {name}=[0.1, 0.05]")
     if not hasattr(values, "__iter__"):

@@ -1,14 +1,16 @@
 """A study's Dataset: per-case errors, measures and costs on the sweep's axes; fitted orders; Pareto front.
 
 Dimensions are the sweep axes (``h``, ``k``, ``order``, ``scheme``, then any other
-swept parameter). When a parameter is coupled to the others (``k = 0.2 h``), the
-first axis and the coupled parameters become coordinates of one dimension
-``level``. Cases that a union of grids does not contain are NaN (``ran = 0``).
+swept parameter). When a parameter is coupled to the others (``k = 0.2 h``, or
+``gamma_nu`` to ``c_nu``), the axis it is a function of and the coupled parameters
+become coordinates of one dimension ``level`` (:class:`Layout`). Cases that a union
+of grids does not contain are NaN (``ran = 0``).
 
 Observed orders: the least-squares slope of log(error) against log(x) along each
 refinement axis with more than one value (the other refinement axes at their
-finest value), or, for coupled sweeps, along ``h``, ``k`` (only if h is fixed)
-and ``h+k``, for every combination of the remaining axes (``DataArray.polyfit``).
+finest value), or, for coupled refinement sweeps (``k = 0.2 h``), along ``h``, ``k``
+(only if h is fixed) and ``h+k``, for every combination of the remaining axes
+(``DataArray.polyfit``).
 """
 from __future__ import annotations
 
@@ -41,28 +43,29 @@ def _error_units(dim: int) -> dict:
 
 
 class Layout:
-    """Dimensions and coordinates of a study Dataset, and where each case sits in it."""
+    """Dimensions and coordinates of a study Dataset, and where each case sits in it.
+
+    With couplings, the *driver* is the first axis (in dimension order) of which every coupled parameter is a
+    function (k of h for ``k = 0.2 h``, gamma_nu of c_nu, ...): it and the coupled parameters are the
+    coordinates of ``level``. The levels are a refinement series (orders are fitted along them) when
+    the driver or a coupled parameter is a refinement axis; otherwise ``level`` is an axis like any
+    other swept parameter and orders are fitted along the refinement axes, per level.
+    """
 
     def __init__(self, cases, axes: dict, coupled: tuple):
         self.axes, self.coupled = axes, tuple(coupled)
         names = list(axes)
         if coupled:
-            self.driver = names[0]
-            self.dims = ("level",) + tuple(names[1:])
+            self.driver = _driver(cases, axes, self.coupled)
+            self.dims = ("level",) + tuple(n for n in names if n != self.driver)
             self.levels = list(axes[self.driver])
-            self.level_coords = {n: [] for n in coupled}
-            for level_value in self.levels:
-                for n in coupled:
-                    seen = {c[n] for c in cases if c[self.driver] == level_value}
-                    if len(seen) != 1:
-                        from ..errors import ParameterError
-
-                        raise ParameterError(f"the coupled parameter {n} must depend on {self.driver} only "
-                                             f"(it takes {sorted(seen)} at {self.driver} = {level_value})")
-                    self.level_coords[n].append(seen.pop())
+            self.level_coords = {n: [next(c[n] for c in cases if c[self.driver] == v) for v in self.levels]
+                                 for n in coupled}
         else:
             self.driver = None
             self.dims = tuple(names)
+        #: whether the levels refine (then they are the series orders are fitted along)
+        self.refining = bool(coupled) and any(n in REFINEMENT for n in (self.driver,) + self.coupled)
         self.shape = tuple(len(self.levels) if d == "level" else len(axes[d]) for d in self.dims)
 
     def index(self, case) -> tuple:
@@ -85,6 +88,19 @@ class Layout:
             else:
                 coords[d] = list(self.axes[d])
         return coords
+
+
+def _driver(cases, axes: dict, coupled: tuple) -> str:
+    """The first axis (in dimension order) of which every coupled parameter is a function; a ParameterError if none."""
+    swept = [n for n in axes if len(axes[n]) > 1]
+    for name in axes:
+        if all(len({c[p] for c in cases if c[name] == v}) == 1 for v in axes[name] for p in coupled):
+            return name
+    from ..errors import ParameterError
+
+    raise ParameterError(f"the coupled parameter(s) {', '.join(coupled)} must each be a function of one swept axis "
+                         f"({', '.join(swept) or 'none is swept'}), the same for all: a coupling of several axes at "
+                         "once is not a level of the study")
 
 
 def dataset(layout: Layout, rows: dict, n_probe: int, probe_coords: dict, dim: int) -> xr.Dataset:
@@ -133,7 +149,7 @@ def dataset(layout: Layout, rows: dict, n_probe: int, probe_coords: dict, dim: i
 
 
 def _alongs(layout: Layout) -> list:
-    if layout.coupled:
+    if layout.refining:
         return [a for a in ("h", "k", "h+k") if a == "h+k" or a == layout.driver or a in layout.coupled]
     return [a for a in REFINEMENT if a in layout.axes] + ["h+k"]
 
@@ -141,7 +157,7 @@ def _alongs(layout: Layout) -> list:
 def fit(ds: xr.Dataset, layout: Layout):
     """observed_order(norm, along, *other axes) and its standard error (see the module docs)."""
     alongs = _alongs(layout)
-    series_dims = {"level"} if layout.coupled else set(REFINEMENT) & set(layout.dims)
+    series_dims = {"level"} if layout.refining else set(REFINEMENT) & set(layout.dims)
     rest = [d for d in layout.dims if d not in series_dims]
     coeff, err = [], []
     for norm in NORMS:
@@ -162,7 +178,7 @@ def fit(ds: xr.Dataset, layout: Layout):
 
 def _fit_one(err: xr.DataArray, layout: Layout, along: str, rest: list):
     template = err.isel({d: 0 for d in err.dims if d not in rest}, drop=True) * np.nan
-    if layout.coupled:
+    if layout.refining:
         if along == "k" and len(set(layout.levels)) > 1 and "k" in layout.coupled:
             return template, template
         dim = "level"
@@ -210,14 +226,24 @@ def pareto_front(err: np.ndarray, cost: np.ndarray) -> np.ndarray:
 
 
 def fit_order(x, y):
-    """Least-squares slope of log(y) against log(x) and its standard error (NaN with two points).
+    """Least-squares slope of log(y) against log(x) and its standard error.
+
+    Only the points with finite, positive x and y are used (a refused or diverged
+    case is NaN); with fewer than two distinct x among them there is no slope, and
+    both are NaN, without a warning. With two points the standard error is NaN.
 
     Examples
     --------
     >>> round(fit_order([0.1, 0.05, 0.025], [1.0, 0.5, 0.25])[0], 12)
     1.0
+    >>> fit_order([0.1, 0.05], [1.0, float("nan")])
+    (nan, nan)
     """
-    lx, ly = np.log(np.asarray(x, float)), np.log(np.asarray(y, float))
+    x, y = np.asarray(x, float).ravel(), np.asarray(y, float).ravel()
+    usable = np.isfinite(x) & np.isfinite(y) & (x > 0) & (y > 0)
+    lx, ly = np.log(x[usable]), np.log(y[usable])
+    if np.unique(lx).size < 2:
+        return np.nan, np.nan
     if len(lx) == 2:
         return float((ly[1] - ly[0]) / (lx[1] - lx[0])), np.nan
     coef, cov = np.polyfit(lx, ly, 1, cov=True)

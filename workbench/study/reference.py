@@ -1,6 +1,6 @@
 """What a study compares its cases with: a finer run, an independent solution, or nothing.
 
-Errors (SPEC, Corollary 6.7), at the study's comparison times t_j:
+Errors (docs/models.md; Corollary 6.7 of the 2003 paper), at the study's comparison times t_j:
 ``error = max_j (|u - u_ref|_V + |sigma - sigma_ref|_Q + |beta - beta_ref|_L2(Gamma3))``,
 each part also alone (``error_V``, ``error_Q``, ``error_beta``), the probe errors
 ``error_probe`` (max over the common recorded times) and the bonding field at the
@@ -177,7 +177,9 @@ def make(spec, scene, cases, axes):
         if unknown:
             raise ParameterError(f"reference: unknown key(s) {sorted(unknown)}; allowed: "
                                  f"{', '.join(sorted(DISCRETISATION))}")
-        values = {"h": min(axes["h"]), "k": min(axes["k"]), "order": max(axes["order"]), "scheme": axes["scheme"][0]}
+        # from the cases, not the axes: a coupled h, k, order or scheme is not an axis
+        values = {"h": min(c.h for c in cases), "k": min(c.k for c in cases), "order": max(c.order for c in cases),
+                  "scheme": cases[0].scheme}
         values |= spec
         for name in ("h", "k"):
             if name in spec:

@@ -20,7 +20,7 @@ from ..contact import ContactTerm
 
 
 class AdhesivePull(ContactTerm):
-    name, rank = "adhesion", 20
+    name, rank, side = "adhesion", 20, "tension"
     uses_beta = True
 
     def __init__(self, gamma_nu: float, L: float, sign: float = 1.0):

@@ -23,7 +23,7 @@ from ..contact import ContactTerm
 
 
 class PowerLawPull(ContactTerm):
-    name, rank = "power_pull", 25
+    name, rank, side = "power_pull", 25, "tension"
     uses_beta = True
     parameters = (
         Param("gamma_p", 0.0, "Pa/m", "power-law adhesive pull: -gamma_p beta^2 L ((-R(u_nu))_+ / L)^q_p "
