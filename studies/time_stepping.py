@@ -72,7 +72,7 @@ def slab(h, quick):
             + [("bdf2", dict(scheme="bdf2", k=0.04 / 2 ** j)) for j in range(n_bdf)]
             + [("adaptive bdf2", dict(scheme="bdf2", rtol=r, k=0.1 * math.sqrt(r / 1e-2))) for r in tols]
             + [("adaptive implicit", dict(scheme="implicit", rtol=r, k=0.1 * math.sqrt(r / 1e-2)))
-               for r in tols[:3]])
+               for r in tols[:2]])  # (rtol 1e-4: 135069 steps, 579 s, error 2.6e-4 - measured once, left out)
     rows = []
     for method, kw in plan:
         tip, cost, steps, rejected = _run(h=h, **kw)

@@ -101,7 +101,8 @@ def _run(sc, model, grid, record_times, progress, limit, threads, call):
         if adaptive:
             sync = tuple(sc["snapshots"]) + (tuple(record_times) if record_times is not None else ())
             steps = AdaptiveSteps(sc["T"], sc["k"], rtol=sc["rtol"], atol=sc["atol"], k_min=sc["k_min"],
-                                  k_max=sc["k_max"] or sc["T"], order=scheme.order, sync=sync)
+                                  k_max=sc["k_max"] or sc["T"], order=scheme.order, sync=sync,
+                                  admissible=scheme.admissible_step)
             checks = scheme.preflight(sc["k"])
         else:
             steps = FixedSteps(grid)

@@ -192,6 +192,11 @@ class Scheme:
             self._free_dofs = np.flatnonzero(mask)
         return self._free_dofs
 
+    def admissible_step(self, k: float) -> float:
+        """The step (<= k) an error-controlled run should take instead of k: k itself unless the scheme's operator
+        depends on more than k (BDF2)."""
+        return k
+
     def event(self, start: dict):
         """(theta, crossed): where in the last step to land on a kink (None: nowhere) and the largest share of
         the boundary whose laws switched inside it (0: none; a kink makes a predictor-based estimate first order

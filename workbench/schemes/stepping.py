@@ -141,7 +141,9 @@ class AdaptiveSteps:
       could grow by less than 1.5 (:attr:`hold`).
 
     Steps are rounded down to k0 2^(j/4) (so that schemes which factor a matrix per step
-    size meet the same few sizes again: they keep a small cache), shortened to land on the
+    size meet the same few sizes again: they keep a small cache), shortened further where the
+    scheme asks (``admissible``: BDF2's operator depends on the step ratio too, so it snaps its
+    a0 to a grid instead), shortened to land on the
     ``sync`` times (snapshots, requested records) and on T (halved when within 2 k of them, so
     that no sliver of a step is left before them), for BDF2 at most twice the last step (also
     after landing on an event), and kept within [k_min, k_max];
@@ -156,7 +158,7 @@ class AdaptiveSteps:
     #: steps without.
     hold = 1.5
 
-    def __init__(self, T, k0, *, rtol, atol, k_min, k_max, order, sync=(), t0=0.0):
+    def __init__(self, T, k0, *, rtol, atol, k_min, k_max, order, sync=(), t0=0.0, admissible=None):
         self.t, self.T, self.k = float(t0), float(T), float(min(k0, k_max))
         self.k0, self.rtol, self.atol, self.k_min, self.k_max = float(k0), rtol, atol, k_min, k_max
         self.order = order
@@ -169,6 +171,9 @@ class AdaptiveSteps:
         self._proposed = None
         self._resume = None
         self._k_last = None
+        self._k_request = None  # the step asked for, when the scheme shortened it (admissible)
+        #: k -> the step the scheme would rather take (<= k; BDF2: one whose a0 is on its grid)
+        self.admissible = admissible or (lambda k: k)
 
     @property
     def t0(self) -> float:
@@ -197,7 +202,18 @@ class AdaptiveSteps:
         d = target - self.t
         # land on the next sync time (or T) without a sliver before it: one step if it is within k,
         # two equal ones if within 2 k
-        end = target if d <= k * (1 + 1e-9) else self.t + d / 2 if d <= 2 * k else self.t + k
+        self._k_request = None
+        if d <= k * (1 + 1e-9):
+            end = target
+        elif d <= 2 * k:
+            end = self.t + d / 2
+        else:  # a free step: the scheme may shorten it to one whose operator it has factored already
+            k_free = self.admissible(k)
+            if self.k_min <= k_free < k:
+                # the next step is chosen from k, not from the shortened step: shortening and rounding down
+                # again would ratchet the step down
+                k, self._k_request = k_free, k
+            end = self.t + k
         self._proposed = end
         return self.t, end
 
@@ -237,7 +253,8 @@ class AdaptiveSteps:
         factor = min(self.growth, max(0.2, factor))
         if 1.0 <= factor < self.hold:  # keep the step (and the factored matrix) unless it can grow clearly
             factor = 1.0
-        self.k = self._quantize(min(self.k_max, max(self.k_min, k * factor)))
+        basis = self._k_request or k
+        self.k = self._quantize(min(self.k_max, max(self.k_min, basis * factor)))
 
     def rejected(self, err=None, theta=None, failed=False) -> None:
         """Shorten the step after a rejection (see the class docs); StepTooSmall below k_min."""
