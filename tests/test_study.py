@@ -381,3 +381,31 @@ def test_case_history_abbreviates_long_record_times(tmp_path):
     for path in sorted(tmp_path.glob("*.nc")):
         history = workbench.load(path).attrs["history"]
         assert len(history) < 200 and "record_times=[0.0, 0.002, 0.004, ..., 0.998, 1.0] (501 values)" in history
+
+
+def test_case_files_are_keyed_by_scheme_options_and_versions(tmp_path):
+    """A scheme option (here the tolerance of error-controlled steps, and the memory rule of Model B) and the
+    package versions are inputs of a case too: a case file made otherwise is recomputed, and the reason names it."""
+    import json
+    import warnings
+
+    from workbench.study.cases import read_case
+
+    for scene, first, second in (("tp1", {"rtol": 1e-2, "scheme": "bdf2"}, {"rtol": 1e-3, "scheme": "bdf2"}),
+                                 ("memory_rod", {"memory_rule": "rectangle"}, {"memory_rule": "trapezoid"})):
+        folder = tmp_path / scene
+        Study(scene, k=[0.04, 0.02], reference="ode" if scene != "tp1" else "exact", workers=0,
+              **first).run(folder, progress=False)
+        with warnings.catch_warnings(record=True) as caught:
+            warnings.simplefilter("always")
+            Study(scene, k=[0.04, 0.02], reference="ode" if scene != "tp1" else "exact", workers=0,
+                  **second).run(folder, progress=False)
+        said = " ".join(str(w.message) for w in caught)
+        name, value = next(iter(second.items()))  # (the first entry is the one that differs)
+        assert "recomputing" in said and f"{name} " in said and str(value) in said, said
+    path = sorted((tmp_path / "tp1").glob("*.nc"))[0]
+    expected = json.loads(workbench.load(path).attrs["case_inputs"])
+    assert read_case(path, expected)[0] is not None
+    other = dict(expected, workbench="0.0.0+other")
+    ds, reason = read_case(path, other)
+    assert ds is None and "workbench" in reason and "0.0.0+other" in reason
