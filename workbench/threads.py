@@ -29,7 +29,14 @@ import contextlib
 
 @contextlib.contextmanager
 def blas_single_threaded():
-    """Hold every loaded BLAS pool (NumPy's, SciPy's, NGSolve's OpenBLAS) at one thread inside the block."""
+    """Hold every BLAS pool (NumPy's, SciPy's, NGSolve's OpenBLAS) at one thread inside the block.
+
+    The libraries a run uses are loaded first: threadpoolctl limits only the pools loaded when the
+    block starts, and one loaded later (in a process where NumPy came before workbench) would run
+    with as many threads as cores.
+    """
+    import ngsolve  # noqa: F401
+    import scipy.linalg  # noqa: F401
     from threadpoolctl import threadpool_limits
 
     with threadpool_limits(limits=1, user_api="blas"):
