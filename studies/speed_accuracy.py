@@ -1,11 +1,13 @@
-"""The speed/accuracy trade on the slab: P1 vs P2, several k, explicit vs implicit.
+"""The speed/accuracy trade on the slab: P1 vs P2, several k, explicit, backward Euler, BDF2 and error control.
 
 Run:  python studies/speed_accuracy.py [--out data/studies] [--quick]
 
 Scene: the stiff slab of the stability issue (tp4's point force at the top-right
 corner, c_nu = 100, gamma_nu = 20, L = 0.3), T = 1. The explicit scheme must
-stay below k_crit ~ 7e-4; the implicit one may take any k. One Study: the union
-of a k-grid per scheme. Errors are taken against one fine run (P2, h = 0.00625,
+stay below k_crit ~ 7e-4; the implicit ones (backward Euler, BDF2) may take any k;
+error-controlled runs (rtol = 1e-2, 1e-3, 1e-4, first step 0.01) choose their own. One
+Study: the union of a k-grid per scheme and an rtol grid, so that every kind of run
+lies on one Pareto plot. Errors are taken against one fine run (P2, h = 0.00625,
 implicit, k = 2.5e-4) at T: the tip displacement u_y(1, 0.1) and beta at (1, 0)
 (the Study's measures ``tip`` and ``beta``), relative to the reference's values
 (``rel_error_tip``, ``rel_error_beta``; the load is switched on at t = 0, so a
@@ -40,7 +42,10 @@ def end_values(ds):
 
 def sweep(out: Path, quick: bool):
     grids = [{"scheme": ["implicit"], "k": [0.02, 0.005] if quick else [0.02, 0.01, 0.005, 0.0025]},
-             {"scheme": ["explicit"], "k": [0.0005] if quick else [0.0005, 0.00025]}]
+             {"scheme": ["explicit"], "k": [0.0005] if quick else [0.0005, 0.00025]},
+             {"scheme": ["bdf2"], "k": [0.02, 0.005] if quick else [0.04, 0.02, 0.01, 0.005]},
+             # error-controlled (k: the first step only): backward Euler and BDF2 at three tolerances
+             {"scheme": ["implicit", "bdf2"], "rtol": [1e-2] if quick else [1e-2, 1e-3, 1e-4], "k": [0.01]}]
     ref = dict(REFERENCE, h=0.0125, k=0.001) if quick else REFERENCE
     st = Study("tp4", h=[0.05, 0.025] if quick else [0.05, 0.025, 0.0125], order=[1, 2], grids=grids, reference=ref,
                measures=end_values, workers=1, n_compare=5, **STIFF)
@@ -67,7 +72,8 @@ def main():
         for tol in (0.1, 0.01, 0.001):
             best = cheapest(ds, tol, error=quantity)
             what = "none of the cases" if best is None else \
-                (f"P{best['order']} {best['scheme']}, h = {best['h']:g}, k = {best['k']:g}: "
+                (f"P{best['order']} {best['scheme']}, h = {best['h']:g}, "
+                 + (f"rtol = {best['rtol']:g}" if best.get("rtol") else f"k = {best['k']:g}") + ": "
                  f"error {100 * best[quantity]:.3g} %, {best['wall_time']:.2f} s")
             print(f"{quantity} <= {100 * tol:g} %: {what}")
     table = ds[["rel_error_tip", "rel_error_beta", "wall_time", "setup_time", "ndof", "nsteps"]].to_dataframe()

@@ -204,6 +204,25 @@ def tolerance(study_ds, path=None, error="error", cost="wall_time"):
     return _save(fig, path)
 
 
+def _kinds(index, names):
+    """(label, mask, marker) per kind of run: one per scheme, error-controlled runs (rtol > 0) apart; one group
+    'cases' when the study sweeps neither."""
+    keys = [name for name in ("scheme", "rtol") if name in names]
+    if not keys:
+        return [("cases", np.ones(len(index), dtype=bool), "o")]
+    scheme = np.asarray(index.get_level_values("scheme")) if "scheme" in keys else np.full(len(index), "")
+    adaptive = np.asarray(index.get_level_values("rtol"), dtype=float) > 0 if "rtol" in keys \
+        else np.zeros(len(index), dtype=bool)
+    out = []
+    for name in dict.fromkeys(scheme):
+        for adapt in (False, True):
+            members = (scheme == name) & (adaptive == adapt)
+            if members.any():
+                out.append((f"{name or 'cases'}{' (error-controlled)' if adapt else ''}", members,
+                            "s" if adapt else "o"))
+    return out
+
+
 def pareto(study_ds, path=None, error="error", cost="wall_time"):
     """Error against cost (wall time incl. setup) of every case; the Pareto front (``study_ds.pareto``) joined and
     numbered, the numbers explained beside the plot."""
@@ -220,13 +239,16 @@ def pareto(study_ds, path=None, error="error", cost="wall_time"):
 
         front = pareto_front(err, c).astype(bool) & ok
     fig, ax = figure(figsize=(7.5, 3.8))
-    ax.loglog(c[ok], err[ok], "o", color="tab:blue", alpha=0.5, label="cases")
-    idx = np.nonzero(front)[0][np.argsort(c[front])]
-    ax.loglog(c[idx], err[idx], "-o", color="tab:red", label="Pareto front")
-    lines = []
     names = stacked.indexes["case"].names
+    for label, members, marker in _kinds(stacked.indexes["case"], names):
+        sel = ok & members
+        if sel.any():
+            ax.loglog(c[sel], err[sel], marker, alpha=0.5, label=label)
+    idx = np.nonzero(front)[0][np.argsort(c[front])]
+    ax.loglog(c[idx], err[idx], "-o", color="black", mfc="none", label="Pareto front")
+    lines = []
     for n, i in enumerate(idx, start=1):
-        ax.annotate(str(n), (c[i], err[i]), xytext=(4, 4), textcoords="offset points", fontsize=7, color="tab:red")
+        ax.annotate(str(n), (c[i], err[i]), xytext=(4, 4), textcoords="offset points", fontsize=7, color="black")
         values = stacked.indexes["case"][i]
         lines.append(f"{n}: " + ", ".join(f"{d}={v:g}" if isinstance(v, (float, np.floating)) else f"{d}={v}"
                                           for d, v in zip(names, values) if study_ds.sizes.get(d, 1) > 1
@@ -234,6 +256,6 @@ def pareto(study_ds, path=None, error="error", cost="wall_time"):
     units = err_da.attrs.get("units", "")
     ax.set(xlabel=f"{cost} + setup [s]" if cost == "wall_time" else f"{cost} [s]", ylabel=f"{error} [{units}]",
            title=f"{plain(study_ds.attrs.get('scene'))}: accuracy vs cost")
-    ax.legend(fontsize=7, loc="lower left")
+    ax.legend(fontsize=7, loc="lower left", bbox_to_anchor=(1.02, 0.0))  # beside the data, below the numbers
     ax.text(1.02, 1.0, "\n".join(lines), transform=ax.transAxes, va="top", fontsize=7, family="monospace")
     return _save(fig, path)

@@ -191,10 +191,13 @@ def _fit_one(err: xr.DataArray, layout: Layout, along: str, rest: list):
         others = {d: -1 for d in REFINEMENT if d in err.dims and d != along}
         y = err.isel(others, drop=True)
         x = np.asarray(layout.axes[along], dtype=float)
+    x = np.asarray(x, dtype=float)
+    if not (x > 0).all():  # (an axis with 0, e.g. rtol = 0 for fixed steps beside error-controlled ones)
+        y, x = y.isel({dim: np.flatnonzero(x > 0)}), x[x > 0]
     with np.errstate(divide="ignore", invalid="ignore"):
         logy = np.log(y.where(np.isfinite(y) & (y > 0)))
     logy = logy.drop_vars([c for c in logy.coords if dim in logy[c].dims and c != dim])
-    logy = logy.assign_coords({dim: np.log(np.asarray(x, dtype=float))})
+    logy = logy.assign_coords({dim: np.log(x)})
     count = np.isfinite(logy).sum(dim)
     if int(count.max()) < 2:
         return template, template
