@@ -6,6 +6,7 @@ Examples (shell)::
     workbench show tp5
     workbench run tp1 --k 0.005 -o out/tp1.nc --plot out/tp1.png
     workbench run slab --set "traction_top=(0, 2*t)" --set gamma_nu=1 -o out/slab.nc
+    workbench run --restart out/slab.nc --set T=2 -o out/slab-2.nc
     workbench study tp1 --k 0.04 0.02 0.01 --reference ode -o out/tp1-k.nc --plot out/tp1-k.png
     workbench reproduce all --out out/reproduction
 
@@ -183,8 +184,13 @@ def cmd_run(args) -> int:
 
     _check_outputs(args)
     overrides = _overrides(args)
+    if args.scene is None and args.restart is None:
+        raise ParameterError("give a scene (a built-in name or a .toml file), or --restart ARCHIVE to continue a run "
+                             "(see: workbench run --help)")
     try:
-        ds = run(args.scene, progress=False if args.no_progress else None, threads=_threads(args.threads), **overrides)
+        # -o is also where checkpoints go (checkpoint_every): a killed run goes on with the same command + --restart
+        ds = run(args.scene, restart=args.restart, checkpoint=args.output,
+                 progress=False if args.no_progress else None, threads=_threads(args.threads), **overrides)
         code = 0
     except Diverged as err:
         print(_one_line(f"error: {err}"), file=sys.stderr)
@@ -321,8 +327,10 @@ def cmd_reproduce(args) -> int:
     return code
 
 
-def _add_scene_args(p, run_options=True):
-    p.add_argument("scene", help="built-in scene name (see 'workbench scenes') or a .toml scene file")
+def _add_scene_args(p, run_options=True, optional=False):
+    p.add_argument("scene", nargs="?" if optional else None,
+                   help="built-in scene name (see 'workbench scenes') or a .toml scene file"
+                   + (" (with --restart: the archive's, unless given)" if optional else ""))
     p.add_argument("--set", action="append", metavar="NAME=VALUE", help="override a parameter (repeatable)")
     if run_options:
         p.add_argument("--h", type=float, help="element size")
@@ -341,8 +349,11 @@ def build_parser() -> argparse.ArgumentParser:
     _add_scene_args(p, run_options=True)
     p.set_defaults(func=cmd_show)
     p = sub.add_parser("run", help="run a scene, write a netCDF archive and plots")
-    _add_scene_args(p)
-    p.add_argument("-o", "--output", help="netCDF archive to write (atomically)")
+    _add_scene_args(p, optional=True)
+    p.add_argument("-o", "--output", help="netCDF archive to write (atomically; also the checkpoints of "
+                   "checkpoint_every)")
+    p.add_argument("--restart", metavar="ARCHIVE", help="continue the run archived in ARCHIVE (or its last "
+                   "checkpoint) to T; only T and output options may differ")
     p.add_argument("--plot", help="PNG overview plot to write")
     p.add_argument("--vtk", metavar="DIR", help="write VTK (.vtu + .pvd) files of the snapshots for ParaView")
     p.add_argument("--no-progress", action="store_true", help="no progress bar")

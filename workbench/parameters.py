@@ -273,6 +273,9 @@ PARAMETERS: dict[str, Param] = {p.name: p for p in [
     # output
     _p("probes", (), "m", "points where u is recorded every step", "points"),
     _p("snapshots", (), "s", "times at which whole fields are stored (T is always stored)", "times"),
+    _p("checkpoint_every", 0, "1", "write the archive so far with the full state every N accepted steps to the "
+       "output file (-o; workbench.run: checkpoint=PATH), so that a killed run goes on with --restart; 0: only the "
+       "final archive holds the state", "int", lower=0),
 ]}
 
 

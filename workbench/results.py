@@ -13,6 +13,7 @@ Schema (docs/conventions.md, the result Dataset):
 ``u_dofs(snapshot, dof)``                 the displacement dof vector (exact field reconstruction)
 ``cell_vertices(cell, corner)``           mesh connectivity, with ``vertex_x/y/z`` coordinates
 ``u_edges(snapshot, edge, component)``    order >= 2: the field at the edge midpoints (``edge_vertices``)
+``state_*``, attribute ``state_json``     the full state at the last time, to continue the run (:mod:`.restart`)
 ========================================  =====================================================
 
 Dataset attributes hold every scene parameter under its own name (expressions
@@ -180,6 +181,28 @@ class Recorder:
         if any(abs(t - s) <= self.tol for s in self.snapshot_times):
             self.snapshot(t, scheme)
 
+    def state(self) -> dict:
+        """What the record schedule carries from step to step (the records themselves are the Dataset)."""
+        return {"step": self.step, "last": self.last, "stride": self.stride}
+
+    def resume(self, ds: xr.Dataset, state: dict) -> None:
+        """Go on from the records of ``ds`` (an archive of this run) and the schedule ``state`` (:meth:`state`).
+
+        The snapshots kept are those at this run's snapshot times: an archive's final field at its own T is
+        dropped when the run now goes beyond it (as a run straight to the new T would not store it).
+        """
+        self.step, self.last, self.stride = int(state["step"]), float(state["last"]), int(state["stride"])
+        self.times, self.steps = list(ds.time.values), list(ds.step.values)
+        self.u_probe, self.u_contact = list(ds.u_probe.values), list(ds.u_contact.values)
+        self.beta = list(ds.beta.values) if "beta" in ds else []
+        self.extra = {n: list(v.values) for n, v in ds.data_vars.items() if v.dims == ("time",)}
+        self.node_extra = {n: list(v.values) for n, v in ds.data_vars.items() if v.dims == ("time", "node")}
+        self.snaps = []
+        for i, t in enumerate(ds.snapshot_time.values if "snapshot_time" in ds.coords else []):
+            if any(abs(t - s) <= self.tol for s in self.snapshot_times):
+                edges = ds.u_edges.values[i] if "u_edges" in ds else None
+                self.snaps.append((float(t), ds.u_dofs.values[i], ds.stress.values[i], ds.von_mises.values[i], edges))
+
     def snapshot(self, t: float, scheme) -> None:
         """Keep the whole field: u, the P0 stress sigma_h = P_Q[...] and its von Mises norm."""
         from .physics.kelvin_voigt import stress_and_von_mises
@@ -331,8 +354,11 @@ class Clock:
         return self
 
     def __exit__(self, *exc):
-        self.wall = _time.perf_counter() - self.wall0
-        self.cpu = _time.process_time() - self.cpu0
+        self.wall, self.cpu = self.elapsed()
+
+    def elapsed(self) -> tuple:
+        """(wall, cpu) seconds since the block began (inside it: so far)."""
+        return _time.perf_counter() - self.wall0, _time.process_time() - self.cpu0
 
 
 def far_facet(beta: xr.DataArray) -> xr.DataArray:

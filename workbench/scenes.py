@@ -40,7 +40,7 @@ _CONTACT = ("contact", "adhesion", "c_nu", "m_nu", "gap", "gamma_nu", "eps_a", "
             "bonding_truncation") + LAW_PARAMETERS
 _ADAPTIVE = ("rtol", "atol", "k_min", "k_max")
 _TIME = ("T", "k", "scheme", "order", "h", "solver", "allow_unstable") + _ADAPTIVE
-_OUTPUT = ("probes", "snapshots")
+_OUTPUT = ("probes", "snapshots", "checkpoint_every")
 _KV = ("E", "nu", "a1", "a2", "elastic_tensor", "viscous_tensor")
 _TIME_B = ("T", "k", "scheme", "order", "h", "solver") + _ADAPTIVE
 _UNILATERAL = ("gap", "F", "c")

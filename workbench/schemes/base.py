@@ -23,10 +23,12 @@ the state u, v and, for Model A, beta) from one time to the next. The time loop
     The step to t is kept: it joins the history of accepted states (the last
     :attr:`Scheme.keep`), which multistep schemes, predictors, error estimates and
     event detection read.
-``state() -> dict`` / ``restore(state)``
+``state(restart=False) -> dict`` / ``restore(state)``
     The full state (u, v, beta, the history, and whatever the scheme keeps: memory
     histories, active sets), as copies; restoring it makes the scheme bitwise what it
     was (a rejected adaptive step is redone from it; a restart continues from it).
+    ``restart=True`` adds what only a new process needs (``cache``: which step sizes
+    the cached factorisations were built from, :meth:`Scheme._cache_state`).
 ``local_error(rtol, atol) -> float``
     The scaled local error of the step just taken (<= 1: acceptable), from the
     difference to a predictor of the scheme's order; ``None`` when the history is
@@ -98,13 +100,17 @@ class Scheme:
         del self.history[: -self.keep]
         self.u_scale = max(self.u_scale, float(np.abs(u).max()))
 
-    def state(self) -> dict:
+    def state(self, restart: bool = False) -> dict:
+        """The full state as copies (module docs); ``restart``: with the cache's make-up (a new process)."""
         d = self.d
         beta = self._beta()
-        return {"u": d.u.vec.FV().NumPy().copy(), "v": d.v.vec.FV().NumPy().copy(),
-                "beta": None if beta is None else beta.copy(), "k_last": self.k_last, "u_scale": self.u_scale,
-                "history": [(t, u.copy(), None if b is None else b.copy()) for t, u, b in self.history],
-                "extra": self._extra_state()}
+        out = {"u": d.u.vec.FV().NumPy().copy(), "v": d.v.vec.FV().NumPy().copy(),
+               "beta": None if beta is None else beta.copy(), "k_last": self.k_last, "u_scale": self.u_scale,
+               "history": [(t, u.copy(), None if b is None else b.copy()) for t, u, b in self.history],
+               "extra": self._extra_state()}
+        if restart:
+            out["cache"] = self._cache_state()
+        return out
 
     def restore(self, state: dict) -> None:
         d = self.d
@@ -115,12 +121,22 @@ class Scheme:
         self.k_last, self.u_scale = state["k_last"], state["u_scale"]
         self.history = [(t, u.copy(), None if b is None else b.copy()) for t, u, b in state["history"]]
         self._restore_extra(state["extra"])
+        if "cache" in state:  # (a rollback within the run keeps the factorisations it has)
+            self._restore_cache(state["cache"])
 
     def _extra_state(self) -> dict:
         """What else the scheme keeps between steps (copies)."""
         return {}
 
     def _restore_extra(self, extra: dict) -> None:
+        return None
+
+    def _cache_state(self) -> list:
+        """The numbers that rebuild the scheme's cached operators exactly as they are (empty: nothing cached, or a
+        cache whose entries depend on their keys alone)."""
+        return []
+
+    def _restore_cache(self, cache: list) -> None:
         return None
 
     # -- error control -----------------------------------------------------------------------------------

@@ -97,23 +97,40 @@ class ImplicitEuler(KelvinVoigtScheme):
         """v_n = a0 (u_n - u_{n-1}) + w_n."""
         return a0 * du if w is None else a0 * du + w
 
+    @staticmethod
+    def _key(a0: float) -> float:
+        return float(f"{a0:.11g}")  # (a0 snapped to a grid by BDF2 comes back equal only to round-off)
+
     def _prepare(self, a0: float, k: float) -> None:
-        """a0 K_A + K_G from the assembled matrices (same sparsity), factored and condensed; cached by a0."""
+        """a0 K_A + K_G from the assembled matrices (same sparsity), factored and condensed; cached by a0.
+
+        An entry serves every a0 of its key, so it is the operator of the a0 that first met the key (fixed steps of
+        the uniform grid differ in the last bits): the cache's a0s are restart state (:meth:`_cache_state`). A
+        restored entry is that a0 alone until it is used, then built from it.
+        """
         d = self.d
-        key = float(f"{a0:.11g}")  # (a0 snapped to a grid by BDF2 comes back equal only to round-off)
-        if key in self._factors:
-            self._factors.move_to_end(key)
-        else:
+        key = self._key(a0)
+        entry = self._factors.get(key)
+        if not isinstance(entry, tuple):
+            built_from = a0 if entry is None else entry
             M = d.viscous.mat.CreateMatrix()
-            M.AsVector().data = a0 * d.viscous.mat.AsVector() + d.elastic.mat.AsVector()
+            M.AsVector().data = built_from * d.viscous.mat.AsVector() + d.elastic.mat.AsVector()
             solver = solvers.factor(M, d.fes.FreeDofs(), d.u.vec, d.scene["solver"])
             newton = CondensedNewton(CondensedSystem(solver, d.ndof, self.op.C), self.op) \
                 if self.op is not None and self.op.size else None
-            self._factors[key] = (M, solver, newton)
+            self._factors[key] = (M, solver, newton, built_from)
             while len(self._factors) > self.cache_size:
                 self._factors.popitem(last=False)
-        self.M, self.solver, self.newton = self._factors[key]
+        self._factors.move_to_end(key)
+        self.M, self.solver, self.newton, _ = self._factors[key]
         self.resolved = self.bonding is None or self.bonding.resolved(k, d.model.beta0)
+
+    def _cache_state(self) -> list:
+        """The a0 each cached operator was built from, least recently used first."""
+        return [entry[3] if isinstance(entry, tuple) else entry for entry in self._factors.values()]
+
+    def _restore_cache(self, cache: list) -> None:
+        self._factors = OrderedDict((self._key(a0), float(a0)) for a0 in cache)
 
     # -- one step ---------------------------------------------------------------------------------------------
     def step(self, t_prev: float, t_next: float) -> None:

@@ -109,6 +109,23 @@ class FixedSteps:
     def accepted(self, err=None) -> None:
         self.index += 1
 
+    @property
+    def t(self) -> float:
+        """The time reached (the end of the last step taken)."""
+        return float(self.grid[self.index])
+
+    @property
+    def taken(self) -> int:
+        """Steps taken so far (a restarted run counts those before the restart too)."""
+        return self.index
+
+    def state(self) -> dict:
+        """What a restart needs to go on with the same grid: the index reached, and its time (to check the grid)."""
+        return {"kind": "fixed", "index": self.index, "time": self.t}
+
+    def restore(self, state: dict) -> None:
+        self.index = int(state["index"])
+
 
 class StepTooSmall(Diverged):
     """Error control asked for a step below k_min."""
@@ -189,6 +206,23 @@ class AdaptiveSteps:
 
     def done(self) -> bool:
         return self.t >= self.T - self.tol
+
+    @property
+    def taken(self) -> int:
+        """Accepted steps so far (a restarted run counts those before the restart too)."""
+        return self.accepted_steps
+
+    #: What the controller carries from step to step (the rest is set by the constructor from the scene): a restart
+    #: that restores these takes the steps the uninterrupted run takes.
+    _STATE = ("t", "k", "err_prev", "accepted_steps", "rejected_steps", "growth", "_proposed", "_resume", "_k_last",
+              "_k_request")
+
+    def state(self) -> dict:
+        return {"kind": "adaptive"} | {name.lstrip("_"): getattr(self, name) for name in self._STATE}
+
+    def restore(self, state: dict) -> None:
+        for name in self._STATE:
+            setattr(self, name, state[name.lstrip("_")])
 
     def _quantize(self, k):
         j = math.floor(4 * math.log2(k / self.k0) + 1e-9)
@@ -361,7 +395,8 @@ class ChatterWatch:
         return bool(np.max(np.sum(self.history, axis=0)) >= self.max_switches)
 
 
-def march(disc, scheme, steps, recorder, *, progress=None, limit=None, limit_origin="the given limit"):
+def march(disc, scheme, steps, recorder, *, progress=None, limit=None, limit_origin="the given limit", resume=False,
+          after_step=None):
     """Advance ``scheme`` with the step controller ``steps``, recording what ``recorder`` wants at each time.
 
     With an adaptive controller every step is judged (scaled local error, kinks inside
@@ -373,6 +408,11 @@ def march(disc, scheme, steps, recorder, *, progress=None, limit=None, limit_ori
     decaying (:class:`OscillationWatch`), or (schemes that ask for it: the explicit one)
     whose contact nodes chatter (:class:`ChatterWatch`); the recorder keeps what was
     computed before. ``limit_origin`` says in the message where the limit came from.
+
+    With ``resume`` the scheme, controller and recorder hold a restored state (a restart,
+    :mod:`workbench.restart`): the loop goes on from it, without ``start`` and the first
+    record. ``after_step(t, n)`` is called after each accepted step is recorded, ``n``
+    counting the steps from the run's start (the runner writes its checkpoints there).
     """
     from tqdm.auto import tqdm
 
@@ -380,15 +420,20 @@ def march(disc, scheme, steps, recorder, *, progress=None, limit=None, limit_ori
 
     u_np = disc.u.vec.FV().NumPy()
     bound = limit or math.inf
-    t = steps.t0
-    scheme.start(t)
-    scheme.accept(t)
-    recorder.record(t, scheme, control=_control(steps, None, None))
+    if resume:
+        t = steps.t
+    else:
+        t = steps.t0
+        scheme.start(t)
+        scheme.accept(t)
+        recorder.record(t, scheme, control=_control(steps, None, None))
+    # a restarted run watches afresh: the watchers only stop a run (they never change its state), so the restart
+    # delays the detection of an instability that began before it by at most their windows (12 and 20 steps)
     watch = OscillationWatch(disc.v.vec.FV().NumPy(), [None] + ([disc.normal_dofs] if disc.dim > 1 else []))
     chatter = ChatterWatch(lambda: disc.normal_displacement(u_np)) if scheme.chatter_watch else None
-    bar = tqdm(total=steps.n_steps, disable=None if progress is None else not progress, unit="step",
+    n = steps.taken
+    bar = tqdm(total=steps.n_steps, initial=n, disable=None if progress is None else not progress, unit="step",
                mininterval=0.5, leave=False, desc=disc.scene.name)
-    n = 0
     try:
         while not steps.done():
             t_prev, t = steps.next()
@@ -431,6 +476,8 @@ def march(disc, scheme, steps, recorder, *, progress=None, limit=None, limit_ori
                 raise Diverged(f"{disc.scene.name}: {what} at step {n} (t = {t:.6g} s) "
                                f"with the {scheme.name} scheme, k = {t - t_prev:.3g} s", step=n, time=t)
             recorder.record(t, scheme, final=steps.done(), control=_control(steps, t - t_prev, err))
+            if after_step is not None:
+                after_step(t, n)
             bar.update()
     finally:
         bar.close()

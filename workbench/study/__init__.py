@@ -91,6 +91,9 @@ class Study:
         self.coupled = tuple(couple)
         union = [dict(base, **g) for g in grids] if grids else [base]
         self.scene = _base_scene(scene, overrides, union[0], couple)
+        if self.scene["checkpoint_every"] or any("checkpoint_every" in g for g in union):
+            raise ParameterError("checkpoint_every applies to a single run with an output file (workbench run -o); a "
+                                 "study archives each case as it finishes")
         self.cases, self.axes = expand(self.scene, union, couple)
         self.n_compare = positive_int("n_compare", n_compare)
         self.workers = positive_int("workers", workers, lower=0)

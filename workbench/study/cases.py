@@ -170,7 +170,9 @@ def inputs(case_scene, record_times, snapshots) -> dict:
         except md.PackageNotFoundError:
             return "unknown"
 
-    return {"scene": case_scene.plain(), "base_scene": case_scene.base, "model": case_scene.model,
+    # (checkpoint_every is where a run writes, not what it computes)
+    scene = {k: v for k, v in case_scene.plain().items() if k != "checkpoint_every"}
+    return {"scene": scene, "base_scene": case_scene.base, "model": case_scene.model,
             "record_times": [float(t) for t in record_times], "snapshots": [float(t) for t in snapshots],
             "workbench": version("workbench"), "ngsolve": version("ngsolve")}
 

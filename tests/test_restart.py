@@ -1,0 +1,228 @@
+"""Restart and checkpoints (issue 14): a continued run is the uninterrupted run, bitwise.
+
+A run to T/2 continued from its archive to T takes the same steps from the same state as the
+run straight to T (the fixed grid of T, entered at the archive's step; the error controller's
+state; the scheme's full state: u, v, beta, history, memory, active set, and the step sizes its
+cached factorisations were built from), so every recorded number is the same bit for bit, not
+only to round-off. The same holds for a run killed (SIGKILL) at random moments and continued
+from its last checkpoint each time. Anything but T and the output options that differs from the
+archive is refused before any work, with every difference listed.
+"""
+import os
+import random
+import signal
+import subprocess
+import sys
+import time
+from pathlib import Path
+
+import numpy as np
+import pytest
+
+import workbench
+from workbench.restart import NoRestartState, has_state, without_state
+
+ROOT = Path(__file__).resolve().parents[1]
+#: What must be equal bitwise: every record (and, with error control, the steps) and the snapshot fields.
+COMPARED = ("time", "step", "u_probe", "u_contact", "beta", "contact_pressure", "contact_state", "step_size",
+            "error_estimate", "newton_iterations", "iterations", "u_dofs", "stress")
+
+#: (scene, T, values): one per scheme and dimension; k = 0.01-like steps (not powers of 2), so that grid steps differ in
+#: their last bits and a factorisation rebuilt from another step's a0 would show.
+CASES = {
+    "explicit-rod-1D": ("tp1", 1.0, dict(h=0.1, k=0.01)),
+    "explicit-slab-2D": ("tp5", 0.2, dict(h=0.1, k=0.01)),
+    "implicit-slab-2D": ("tp5", 0.2, dict(h=0.1, k=0.01, scheme="implicit")),
+    "bdf2-slab-2D": ("tp5", 0.2, dict(h=0.1, k=0.01, scheme="bdf2")),
+    # error control lands on T/2 as a snapshot in both runs (a run to T/2 lands on its T there)
+    "adaptive-bdf2-slab": ("slab", 0.5, dict(h=0.1, order=1, k=1e-3, scheme="bdf2", rtol=1e-3, gamma_nu=20.0,
+                                             traction_top="(0, 5*t)", snapshots=(0.25,))),
+    "vi-prony-slab": ("memory_slab", 1.0, dict(h=0.25)),
+    "vi-kernel-rod": ("memory_rod", 1.0, dict(h=0.1, kernel="exp(-t/0.2)", kernel_E=0.5, prony=())),
+    "implicit-block-3D": ("block", 0.04, dict(h=0.25, k=0.005, scheme="implicit")),
+}
+
+
+def assert_same_run(ds, straight):
+    for name in COMPARED:
+        if name in straight:
+            assert name in ds, name
+            assert np.array_equal(ds[name].values, straight[name].values, equal_nan=True), name
+
+
+@pytest.mark.filterwarnings("ignore::RuntimeWarning")
+@pytest.mark.parametrize("case", list(CASES))
+def test_continued_run_equals_the_straight_run(case, tmp_path):
+    """run to T/2, archive, continue to T: every record, step and snapshot field equals the run straight to T."""
+    scene, T, values = CASES[case]
+    half = workbench.run(scene, T=T / 2, progress=False, **values)
+    assert half.attrs["status"] == "complete" and has_state(half)
+    path = workbench.write(half, tmp_path / "half.nc")
+    ds = workbench.run(scene, restart=path, T=T, progress=False, **values)
+    straight = workbench.run(scene, T=T, progress=False, **values)
+    assert float(half.time[-1]) == T / 2 and ds.attrs["restart_time"] == T / 2
+    assert ds.sizes["time"] == straight.sizes["time"] > half.sizes["time"]
+    assert_same_run(ds, straight)
+    if values.get("rtol"):
+        assert ds.attrs["accepted_steps"] == straight.attrs["accepted_steps"]
+        assert ds.attrs["rejected_steps"] == straight.attrs["rejected_steps"]
+    assert ds.attrs["restarted_from"] == str(path) and len(ds.attrs["history"].splitlines()) == 2
+    # the continued archive holds the final state: it is the straight run's (and can be continued again)
+    for name in ("state_u", "state_v", "state_history_u"):
+        assert np.array_equal(ds[name].values, straight[name].values), name
+
+
+def test_restart_from_the_archive_alone_on_the_command_line(tmp_path):
+    """`workbench run --restart OLD.nc --set T=NEW_T -o NEW.nc` (no scene: the archive's) equals the straight run."""
+    values = dict(h=0.1, k=0.01, scheme="implicit", snapshots=())
+    workbench.write(workbench.run("tp5", T=0.1, progress=False, **values), tmp_path / "old.nc")
+    p = subprocess.run([sys.executable, "-m", "workbench.cli", "run", "--restart", str(tmp_path / "old.nc"), "--set",
+                        "T=0.2", "--no-progress", "-o", str(tmp_path / "new.nc")], capture_output=True, text=True)
+    assert p.returncode == 0, p.stderr
+    ds = workbench.load(tmp_path / "new.nc")
+    assert_same_run(ds, workbench.run("tp5", T=0.2, progress=False, **values))
+    assert ds.attrs["history"].splitlines()[1].endswith(f"-o {tmp_path / 'new.nc'}")
+
+
+def test_checkpoints_are_written_during_the_run_and_continue_it(tmp_path):
+    """checkpoint_every = 7 leaves, in the checkpoint file, the archive at the last multiple of 7 steps (status
+    'checkpoint', its state); continued from it, the run equals the uninterrupted one. Without a file: refused."""
+    values = dict(h=0.1, k=0.01, T=0.2, scheme="bdf2", snapshots=(0.1,))
+    path = tmp_path / "run.nc"
+    straight = workbench.run("tp5", checkpoint=path, checkpoint_every=7, progress=False, **values)
+    cp = workbench.load(path)
+    assert cp.attrs["status"] == "checkpoint" and cp.attrs["nsteps"] == 14 and has_state(cp)
+    assert np.isclose(float(cp.time[-1]), 0.14) and cp.sizes["snapshot"] == 1  # the snapshot at 0.1 s
+    ds = workbench.run("tp5", restart=path, checkpoint=path, checkpoint_every=7, progress=False, **values)
+    assert_same_run(ds, straight)
+    with pytest.raises(workbench.ParameterError, match="checkpoint_every = 7 needs a file"):
+        workbench.run("tp5", checkpoint_every=7, progress=False, **values)
+
+
+KILL_RUN = ["run", "tp5", "--scheme", "bdf2", "--h", "0.05", "--k", "0.001", "--T", "1", "--no-progress",
+            "--set", "checkpoint_every=25"]
+
+
+def test_killed_runs_continue_from_their_checkpoints(tmp_path):
+    """SIGKILL at random moments, at least 10 times: just after a checkpoint, in the middle of writing one (its
+    temporary file exists: the previous checkpoint must survive intact), or anywhere (start-up, steps). Each time the
+    same command plus --restart OUT.nc goes on from the last checkpoint; the end result equals the uninterrupted run."""
+    def launch(*extra):
+        return subprocess.Popen([sys.executable, "-m", "workbench.cli", *KILL_RUN, *extra], stdout=subprocess.DEVNULL,
+                                stderr=subprocess.PIPE, text=True)
+
+    ref = launch("-o", str(tmp_path / "ref.nc"))
+    assert ref.wait() == 0, ref.stderr.read()
+    out = tmp_path / "out.nc"
+
+    def version():
+        try:
+            st = os.stat(out)
+            return st.st_ino, st.st_mtime_ns  # a checkpoint is a new file renamed over the old one
+        except FileNotFoundError:
+            return None
+
+    rng = random.Random(14)
+    kills, progress = 0, []
+    while True:
+        before = version()
+        p = launch("-o", str(out), *(["--restart", str(out)] if before else []))
+        mode, at, t0 = (kills % 3 if kills < 10 else None), rng.uniform(0.1, 1.3), time.perf_counter()
+        while p.poll() is None and mode is not None:
+            new = version() not in (None, before)
+            if mode == 0 and new:  # a moment after a checkpoint: in the steps
+                time.sleep(rng.uniform(0.0, 0.1))
+                break
+            if mode == 1 and new and any(f.startswith(f".out.nc.{p.pid}.") for f in os.listdir(tmp_path)):
+                break  # while this process writes its next checkpoint
+            if mode == 2 and time.perf_counter() - t0 > at:
+                break
+            time.sleep(0.001)
+        if p.poll() is not None or mode is None:
+            assert p.wait() == 0, p.stderr.read()
+            break
+        p.send_signal(signal.SIGKILL)
+        p.wait()
+        kills += 1
+        if out.exists():  # whatever the moment, the file is a whole archive that can be continued
+            cp = workbench.load(out)
+            assert has_state(cp) and cp.attrs["status"] == "checkpoint"
+            progress.append(int(cp.attrs["nsteps"]))
+    assert kills >= 10 and len(set(progress)) >= 3, progress
+    ds, ref_ds = workbench.load(out), workbench.load(tmp_path / "ref.nc")
+    assert ds.attrs["status"] == "complete"
+    assert_same_run(ds, ref_ds)
+    assert not [f for f in os.listdir(tmp_path) if f.endswith(".tmp")]  # the killed writers' temporaries are gone
+
+
+# -- refusals ---------------------------------------------------------------------------------------------------------
+
+@pytest.fixture(scope="module")
+def archives(tmp_path_factory):
+    folder = tmp_path_factory.mktemp("archives")
+    return {"tp5": workbench.write(workbench.run("tp5", h=0.1, k=0.01, T=0.1, progress=False), folder / "tp5.nc"),
+            "rod": workbench.write(workbench.run("memory_rod", h=0.1, T=0.2, kernel="exp(-t/0.2)", kernel_E=0.5,
+                                                 prony=(), progress=False), folder / "rod.nc")}
+
+
+@pytest.mark.parametrize("archive, change, listed", [
+    ("tp5", {"E": 2000}, "E 1000 -> 2000"),
+    ("tp5", {"h": 0.05}, "h 0.1 -> 0.05"),
+    ("tp5", {"order": 2}, "order 1 -> 2"),
+    ("tp5", {"scheme": "implicit"}, "scheme explicit -> implicit"),
+    ("tp5", {"snapshots": (0.05,)}, "snapshots [0.1] -> [0.05]"),  # (one before the archive's time)
+    ("rod", {"kernel": "exp(-t/0.3)"}, "kernel exp(-t/0.2) -> exp(-t/0.3)"),
+])
+def test_restart_refuses_any_other_value(archives, change, listed, archive, tmp_path):
+    with pytest.raises(workbench.ParameterError, match="differs from the archive's in") as err:
+        workbench.run(restart=archives[archive], checkpoint=tmp_path / "new.nc", progress=False, **change)
+    assert listed in str(err.value)
+    assert not (tmp_path / "new.nc").exists()
+
+
+def test_restart_refuses_an_earlier_T_and_another_grid(archives, tmp_path):
+    with pytest.raises(workbench.ParameterError, match="T = 0.05 is before the archive's time t = 0.1 s"):
+        workbench.run(restart=archives["tp5"], T=0.05, progress=False)
+    # without a snapshot at 0.1 s, the grid to 0.205 is 21 steps of 0.00976 s: 0.1 s is not one of its points
+    path = workbench.write(workbench.run("tp5", h=0.1, k=0.01, T=0.1, snapshots=(), progress=False), tmp_path / "a.nc")
+    with pytest.raises(workbench.ParameterError, match="is not step 10 of the time grid to T = 0.205"):
+        workbench.run(restart=path, T=0.205, progress=False)
+    assert workbench.run(restart=archives["tp5"], T=0.205, progress=False).attrs["nsteps"] == 21  # (split at 0.1 s)
+
+
+@pytest.mark.parametrize("archive, sets, listed", [
+    ("tp5", ["E=2000", "h=0.05", "order=2", "scheme=implicit"],
+     ["E 1000 -> 2000", "h 0.1 -> 0.05", "order 1 -> 2", "scheme explicit -> implicit"]),
+    ("rod", ["kernel=exp(-t/0.3)"], ["kernel exp(-t/0.2) -> exp(-t/0.3)"]),
+])
+def test_cli_refusal_is_one_line_listing_every_difference_and_writes_nothing(archives, sets, listed, archive, tmp_path):
+    old = Path(archives[archive])
+    stamp = old.stat().st_mtime_ns
+    args = [a for s in sets for a in ("--set", s)]
+    p = subprocess.run([sys.executable, "-m", "workbench.cli", "run", "--restart", str(old), *args, "--no-progress",
+                        "-o", str(tmp_path / "new.nc")], capture_output=True, text=True)
+    assert p.returncode == 2 and "Traceback" not in p.stderr
+    lines = p.stderr.strip().splitlines()
+    assert len(lines) == 1 and lines[0].startswith("error: restart"), p.stderr
+    assert all(item in lines[0] for item in listed), lines[0]
+    assert not (tmp_path / "new.nc").exists() and old.stat().st_mtime_ns == stamp
+
+
+def test_an_archive_without_state_is_a_named_error(archives, tmp_path):
+    """An older archive (no state), one written without it, one of a diverged run: NoRestartState, saying so."""
+    plain = workbench.write(without_state(workbench.load(archives["tp5"])), tmp_path / "plain.nc")
+    with pytest.raises(NoRestartState, match="has no restart state: it was written before"):
+        workbench.run(restart=plain, progress=False)
+    older = ROOT / "data" / "reproduction" / "tp1.nc"  # archived before restart states existed
+    with pytest.raises(NoRestartState, match="has no restart state"):
+        workbench.run(restart=older, progress=False)
+    with pytest.raises(workbench.Diverged) as err, pytest.warns(RuntimeWarning, match="allow_unstable"):
+        workbench.run("tp5", h=0.1, k=0.1, allow_unstable=True, progress=False)
+    diverged = workbench.write(err.value.dataset, tmp_path / "diverged.nc")
+    with pytest.raises(NoRestartState, match="its run stopped"):
+        workbench.run(restart=diverged, progress=False)
+    with pytest.raises(workbench.ParameterError, match="no such archive"):
+        workbench.run(restart=tmp_path / "missing.nc", progress=False)
+    p = subprocess.run([sys.executable, "-m", "workbench.cli", "run", "--restart", str(plain), "--no-progress"],
+                       capture_output=True, text=True)
+    assert p.returncode == 2 and len(p.stderr.strip().splitlines()) == 1 and "no restart state" in p.stderr

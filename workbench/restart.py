@@ -1,0 +1,336 @@
+"""Restart: the full state of a run in its archive, and the checks before a run goes on from it.
+
+A run's archive (the Dataset of :func:`workbench.run`, and every checkpoint written during a run
+with ``checkpoint_every = N``) holds, at its last time, everything the run needs to go on:
+
+* the scheme's state (:meth:`workbench.schemes.base.Scheme.state`): u, v, beta, the accepted
+  history, what the scheme keeps between steps (Model B: memory histories, the stored steps of a
+  general kernel, the active set and contact forces) and the step sizes its cached factorisations
+  were built from;
+* the step controller's state (the grid index, or the error controller's t, k, err_prev, ...);
+* the recorder's schedule (the step count, the last record, the thinning stride).
+
+Arrays are variables ``state_NAME`` on dimensions ``state_dof``, ``state_history``, ``facet``, ...
+(:data:`STATE_VARIABLES`), the rest one JSON attribute ``state_json``. Continuing restores all of it
+and takes the steps the uninterrupted run takes, so that the result is bitwise the same.
+
+Before any work, :func:`check` refuses a continuation that could not be that: any scene or
+discretisation value other than T (and the output options ``checkpoint_every`` and snapshots after
+the archive's time) that differs from the archive's, with the list of differences; a T before the
+archive's time; a fixed grid on which the archive's time is not a point (:func:`check_grid`).
+
+Examples
+--------
+>>> import numpy as np, tempfile, workbench
+>>> path = tempfile.mkdtemp() + "/half.nc"
+>>> p = workbench.write(workbench.run("tp1", h=0.1, k=0.0625, T=0.5, snapshots=(), progress=False), path)
+>>> ds = workbench.run(restart=path, T=1.0, progress=False)
+>>> straight = workbench.run("tp1", h=0.1, k=0.0625, T=1.0, snapshots=(), progress=False)
+>>> bool(np.array_equal(ds.u_probe, straight.u_probe)), ds.attrs["restart_time"]
+(True, 0.5)
+"""
+from __future__ import annotations
+
+import json
+import warnings
+from pathlib import Path
+
+import numpy as np
+import xarray as xr
+
+from . import results, scenes
+from .errors import ParameterError
+
+PREFIX = "state_"
+ATTR = "state_json"
+#: Raised when the layout changes (an archive of another layout is refused, not misread).
+FORMAT = 1
+#: What a restart may change: the final time and the output options.
+ALLOWED = ("T", "checkpoint_every")
+
+#: (units, long_name) of the state variables ('' units: in the scheme's own units, stated in the name).
+STATE_VARIABLES = {
+    "u": ("m", "restart state: displacement dofs"),
+    "v": ("m/s", "restart state: velocity dofs"),
+    "beta": ("1", "restart state: bonding field on the contact facets"),
+    "history_time": ("s", "restart state: times of the accepted states kept (predictors, multistep formulas)"),
+    "history_u": ("m", "restart state: displacement dofs of the accepted states kept"),
+    "history_beta": ("1", "restart state: bonding field of the accepted states kept"),
+    "histories": ("", "restart state: memory histories H_i (vi), dof vectors"),
+    "times": ("s", "restart state: times of the stored steps (vi, general kernel)"),
+    "stored": ("m", "restart state: stored displacement dofs u_j (vi, general kernel)"),
+    "states": ("1", "restart state: contact node states (vi): 0 separated, 1 stuck, 2 compliant, 3 rigid"),
+    "lam": ("", "restart state: contact node forces (vi)"),
+}
+
+
+class NoRestartState(ParameterError):
+    """An archive that does not hold the state needed to continue its run."""
+
+
+# -- the state in a Dataset -------------------------------------------------------------------------------------
+
+def capture(scheme, steps, recorder) -> dict:
+    """The full state of a run between two steps (copies)."""
+    return {"time": steps.t, "scheme_name": scheme.name, "scheme": scheme.state(restart=True),
+            "steps": steps.state(), "recorder": recorder.state()}
+
+
+def attach(ds: xr.Dataset, state: dict) -> xr.Dataset:
+    """``ds`` with ``state`` (:func:`capture`) as ``state_*`` variables and the ``state_json`` attribute."""
+    arrays, meta = _encode(state)
+    for name, (dims, data) in arrays.items():
+        units, long_name = STATE_VARIABLES.get(name, ("", f"restart state: {name}"))
+        cf = {"long_name": long_name} | ({"units": units} if units else {})
+        ds[PREFIX + name] = xr.Variable(dims, data, attrs=cf)
+    ds.attrs[ATTR] = json.dumps(meta)
+    return ds
+
+
+def has_state(ds: xr.Dataset) -> bool:
+    return ATTR in ds.attrs
+
+
+def without_state(ds: xr.Dataset) -> xr.Dataset:
+    """``ds`` without its restart state (a smaller archive that cannot be continued).
+
+    >>> import workbench
+    >>> ds = workbench.run("tp1", h=0.1, k=0.1, progress=False)
+    >>> has_state(ds), has_state(without_state(ds)), "state_u" in without_state(ds)
+    (True, False, False)
+    """
+    out = ds.drop_vars([n for n in ds.variables if str(n).startswith(PREFIX)])
+    out.attrs = {k: v for k, v in ds.attrs.items() if k != ATTR}
+    return out
+
+
+def _plain(value):
+    """JSON-able scalars and containers (NumPy scalars as Python's; floats keep every bit through repr)."""
+    if isinstance(value, np.generic):
+        return value.item()
+    if isinstance(value, dict):
+        return {k: _plain(v) for k, v in value.items()}
+    if isinstance(value, (list, tuple)):
+        return [_plain(v) for v in value]
+    return value
+
+
+def _dims(name, shape, ndof, stacked=False):
+    """Dimension names: ``state_dof`` for the (first) axis of length ndof, else ``state_NAME_AXIS`` (an axis named
+    as its variable would make the variable a coordinate)."""
+    out = []
+    for j, n in enumerate(shape):
+        dof = n == ndof and "state_dof" not in out and not (stacked and j == 0)
+        out.append("state_dof" if dof else f"{PREFIX}{name}_{j}")
+    return tuple(out)
+
+
+def _encode(state):
+    s = state["scheme"]
+    ndof = s["u"].size
+    arrays = {"u": (("state_dof",), s["u"]), "v": (("state_dof",), s["v"])}
+    if s["beta"] is not None:
+        arrays["beta"] = (("facet",), s["beta"])
+    history = s["history"]
+    if history:
+        arrays["history_time"] = (("state_history",), np.array([h[0] for h in history], dtype=float))
+        arrays["history_u"] = (("state_history", "state_dof"), np.stack([h[1] for h in history]))
+        if history[0][2] is not None:
+            arrays["history_beta"] = (("state_history", "facet"), np.stack([h[2] for h in history]))
+    extra = {}
+    for key, value in s["extra"].items():
+        if key in arrays:
+            raise AssertionError(f"scheme state {key!r} would overwrite a state variable")
+        if isinstance(value, np.ndarray):
+            extra[key] = {"array": list(value.shape), "dtype": value.dtype.str}
+            if value.size:  # (netCDF cannot hold a dimension of length 0 as a fixed one)
+                arrays[key] = (_dims(key, value.shape, ndof), value)
+        elif isinstance(value, list) and value and all(isinstance(v, np.ndarray) for v in value):
+            stacked = np.stack(value)
+            extra[key] = {"arrays": len(value)}
+            arrays[key] = (_dims(key, stacked.shape, ndof, stacked=True), stacked)
+        elif isinstance(value, list) and value and all(isinstance(v, (float, np.floating)) for v in value):
+            extra[key] = {"floats": len(value)}
+            arrays[key] = ((f"{PREFIX}{key}_0",), np.asarray(value, dtype=float))
+        else:
+            extra[key] = {"value": _plain(value)}
+    meta = {"format": FORMAT, "time": float(state["time"]), "scheme_name": state["scheme_name"], "ndof": ndof,
+            "k_last": float(s["k_last"]), "u_scale": float(s["u_scale"]), "history": len(history), "extra": extra,
+            "cache": _plain(s.get("cache", [])), "steps": _plain(state["steps"]),
+            "recorder": _plain(state["recorder"])}
+    return arrays, meta
+
+
+def decode(ds: xr.Dataset) -> dict:
+    """The state stored by :func:`attach` (NoRestartState if there is none)."""
+    if ATTR not in ds.attrs:
+        raise NoRestartState("the archive has no restart state")
+    meta = json.loads(ds.attrs[ATTR])
+    if meta.get("format") != FORMAT:
+        raise NoRestartState(f"the archive's restart state has layout {meta.get('format')}, this workbench reads "
+                             f"layout {FORMAT}")
+
+    def arr(name):
+        return np.array(ds[PREFIX + name].values)  # (a copy: the scheme owns it from now on)
+
+    beta = arr("beta") if PREFIX + "beta" in ds else None
+    history = []
+    if meta["history"]:
+        ht, hu = arr("history_time"), arr("history_u")
+        hb = arr("history_beta") if PREFIX + "history_beta" in ds else None
+        history = [(float(ht[i]), hu[i], None if hb is None else hb[i]) for i in range(len(ht))]
+    extra = {}
+    for key, spec in meta["extra"].items():
+        if "array" in spec:
+            extra[key] = arr(key) if PREFIX + key in ds else np.empty(spec["array"], dtype=np.dtype(spec["dtype"]))
+        elif "arrays" in spec:
+            extra[key] = list(arr(key))
+        elif "floats" in spec:
+            extra[key] = [float(t) for t in arr(key)]
+        else:
+            extra[key] = spec["value"]
+    scheme = {"u": arr("u"), "v": arr("v"), "beta": beta, "k_last": meta["k_last"], "u_scale": meta["u_scale"],
+              "history": history, "extra": extra, "cache": meta["cache"]}
+    return {"time": meta["time"], "scheme_name": meta["scheme_name"], "ndof": meta["ndof"], "scheme": scheme,
+            "steps": meta["steps"], "recorder": meta["recorder"]}
+
+
+def restore(state: dict, disc, scheme, steps, recorder, archive: xr.Dataset) -> None:
+    """Put the run back where the archive left it (the discretisation must be the archive's)."""
+    if state["ndof"] != disc.ndof or state["scheme_name"] != scheme.name:
+        raise ParameterError(f"the archive's restart state is for {state['ndof']} dofs of the {state['scheme_name']} "
+                             f"scheme, this run has {disc.ndof} of the {scheme.name} scheme (an archive of another "
+                             "workbench version?); run it again from the start")
+    scheme.restore(state["scheme"])
+    steps.restore(state["steps"])
+    recorder.resume(archive, state["recorder"])
+
+
+# -- reading an archive, and what may differ -----------------------------------------------------------------------
+
+def read(path):
+    """(Dataset, state) of the archive at ``path``; ParameterError if it cannot be read, NoRestartState if it holds
+    no state to continue from."""
+    path = Path(path)
+    if not path.is_file():
+        raise ParameterError(f"restart {str(path)!r}: no such archive" + (" (a directory)" if path.is_dir() else ""))
+    try:
+        ds = results.load(path)
+    except Exception as err:  # any failure to read: not an archive (empty, truncated, another format)
+        raise ParameterError(f"restart {str(path)!r} cannot be read as an archive ({type(err).__name__})") from None
+    if not has_state(ds):
+        a = ds.attrs
+        if "parameters_json" not in a:
+            why = "it is not the archive of a workbench run"
+        elif a.get("status") == "incomplete":
+            stopped = a.get("failure_type") or "incomplete"
+            why = f"its run stopped ({stopped}), so its last state is not one to go on from"
+        else:
+            why = "it was written before workbench stored the state in its archives, or without it (without_state)"
+        raise NoRestartState(f"restart {str(path)!r}: the archive has no restart state: {why}; run it again from the "
+                             "start")
+    try:
+        state = decode(ds)
+    except NoRestartState as err:
+        raise NoRestartState(f"restart {str(path)!r}: {err}; run it again from the start") from None
+    return ds, state
+
+
+def archived_scene(ds: xr.Dataset, **overrides):
+    """The scene of an archive (every value from ``parameters_json``), with ``overrides``."""
+    a = ds.attrs
+    values = json.loads(a["parameters_json"]) | overrides
+    return scenes.make(a["scene"], values, base=a["base_scene"], description=a.get("description", ""))
+
+
+def _text(value) -> str:
+    if isinstance(value, float):
+        short = f"{value:g}"
+        return short if float(short) == value else repr(value)
+    text = value if isinstance(value, str) else json.dumps(value)
+    return text if len(text) <= 40 else text[:37] + "..."
+
+
+def differences(old, new, t: float, old_terms: str, new_terms: str) -> list:
+    """'E 1000 -> 2000' for every value of ``new`` (a Scene) that differs from ``old``'s, but T and the output
+    options (snapshots only up to the time t)."""
+    out = []
+    for what, a, b in (("scene", old.base, new.base), ("model", old.model, new.model), ("terms", old_terms, new_terms)):
+        if a != b:
+            out.append(f"{what} {a} -> {b}")
+    a, b = old.plain(), new.plain()
+    tol = 1e-9 * max(1.0, t)
+    for key in list(a) + [k for k in b if k not in a]:
+        if key in ALLOWED:
+            continue
+        va, vb = a.get(key, "(absent)"), b.get(key, "(absent)")
+        if key == "snapshots" and isinstance(va, list) and isinstance(vb, list):  # later ones are output options
+            va, vb = [s for s in va if s <= t + tol], [s for s in vb if s <= t + tol]
+        if json.dumps(va, sort_keys=True) != json.dumps(vb, sort_keys=True):
+            out.append(f"{key} {_text(va)} -> {_text(vb)}")
+    return out
+
+
+def check(path, archive: xr.Dataset, state: dict, scene, model_terms) -> None:
+    """Refuse (ParameterError) a continuation of ``archive`` as ``scene`` that the archive's run would not be."""
+    t = state["time"]
+    old = archived_scene(archive)
+    diff = differences(old, scene, t, archive.attrs.get("terms", ""), ",".join(model_terms) or "none")
+    if diff:
+        raise ParameterError(f"restart {str(path)!r}: the run asked for differs from the archive's in "
+                             f"{', '.join(diff)}; a restart may change only T (to >= {t:g} s, the archive's time) and "
+                             f"the output options (checkpoint_every, snapshots after t = {t:g} s): start a new run for "
+                             "other values")
+    check_time(path, state, scene["T"])
+    a = archive.attrs
+    now = results.versions()
+    changed = [f"{k[8:]} {a[k]} -> {now[k]}" for k in ("version_workbench", "version_ngsolve")
+               if k in a and a[k] != now[k]]
+    if changed:
+        warnings.warn(f"restart {str(path)!r}: the archive was made by other versions ({', '.join(changed)}); the "
+                      "continued run may differ from an uninterrupted one by round-off", RuntimeWarning, stacklevel=3)
+
+
+def check_time(path, state: dict, T) -> None:
+    """Refuse a final time T before the archive's."""
+    t = state["time"]
+    if T < t - 1e-9 * max(1.0, t):
+        raise ParameterError(f"restart {str(path)!r}: T = {T:g} is before the archive's time t = {t:g} s; a restart "
+                             "goes on from there (give T >= that)")
+
+
+def check_grid(path, grid: np.ndarray, state: dict, archive: xr.Dataset) -> None:
+    """A fixed-step continuation goes on with the grid of the run straight to the new T, from the archive's step:
+    refuse it if the archive's time is not that grid point (to round-off); warn if its steps are not the grid's
+    bitwise (then the continued run equals the straight one to round-off only)."""
+    i, t = int(state["steps"]["index"]), state["time"]
+    T = float(grid[-1])
+    tol = 1e-9 * max(1.0, T)
+    if i >= len(grid) or abs(grid[i] - t) > tol:
+        where = f"t = {float(grid[i])!r} s there" if i < len(grid) else "beyond its end"
+        raise ParameterError(f"restart {str(path)!r}: the archive's time t = {t!r} s (step {i}) is not step {i} of the "
+                             f"time grid to T = {T:g} ({where}): the new T divides time into other steps; choose a T "
+                             "that is a whole number of the archive's steps from 0")
+    steps, times = archive.step.values, archive.time.values
+    if len(steps) and (steps.max() >= len(grid) or np.abs(grid[steps] - times).max() > tol):
+        raise ParameterError(f"restart {str(path)!r}: the archive's recorded times are not points of the time grid to "
+                             f"T = {T:g}: it was run on another grid (times=..., or other record times)")
+    if grid[i] != t or not np.array_equal(grid[steps], times):
+        j = int(np.argmax(grid[steps] != times)) if not np.array_equal(grid[steps], times) else None
+        a, b = (float(times[j]), float(grid[steps[j]])) if j is not None else (t, float(grid[i]))
+        warnings.warn(f"restart {str(path)!r}: the archive's steps differ from those of the grid to T = {T:g} by "
+                      f"round-off (t = {a!r} there, {b!r} here): the continued run equals a run straight to T to "
+                      "round-off, not bitwise", RuntimeWarning, stacklevel=3)
+
+
+def provenance(attrs: dict, archive: xr.Dataset, path, t: float) -> dict:
+    """The attributes of a continued run: both parts' history lines, where it was continued from, the costs summed."""
+    old = archive.attrs
+    out = dict(attrs)
+    out["history"] = f"{old.get('history', '')}\n{attrs['history']}".strip()
+    out["restarted_from"] = str(path)
+    out["restart_time"], out["restart_time_units"] = float(t), "s"
+    for key in ("setup_time", "wall_time", "cpu_time"):  # the cost of the whole result
+        if key in old and key in out:
+            out[key] = float(old[key]) + float(out[key])
+    return out
