@@ -23,7 +23,9 @@ Examples
 from __future__ import annotations
 
 import ast
+import copy
 import difflib
+import functools
 import math
 from dataclasses import dataclass, field
 
@@ -101,13 +103,8 @@ class Expression:
 
     def __call__(self, x=0.0, y=0.0, z=0.0, t=0.0):
         """Evaluate with NumPy (broadcasting); a float for a constant scalar."""
-        env = {"x": x, "y": y, "z": z, "t": t}
-        funcs = {
-            "sin": np.sin, "cos": np.cos, "tan": np.tan, "exp": np.exp, "log": np.log,
-            "sqrt": np.sqrt, "abs": np.abs,
-            "ifpos": lambda a, b, c: np.where(np.asarray(a) > 0, b, c),
-        }
-        parts = [_walk(term, env, funcs, float) for term in self.terms]
+        env = _NUMPY_NAMESPACE | {"x": x, "y": y, "z": z, "t": t}
+        parts = [eval(code, env) for code in self._compiled]  # noqa: S307 (checked trees, no builtins)
         if len(parts) == 1:
             value = parts[0]
             return float(value) if np.ndim(value) == 0 else np.asarray(value, dtype=float)
@@ -116,6 +113,33 @@ class Expression:
 
     def __str__(self) -> str:
         return self.source
+
+    @functools.cached_property
+    def _compiled(self) -> list:
+        """The checked trees compiled once, numbers as floats (what the tree walk :func:`_walk` computes, operation
+        for operation): a load is evaluated every step, and walking the tree cost tp5 0.14 ms a step. Safe: the trees
+        hold only numbers, the variables, pi, the operators and the allowed functions (:func:`_check`), and they run
+        without builtins."""
+        out = []
+        for term in self.terms:
+            tree = ast.fix_missing_locations(ast.Expression(body=_AsFloats().visit(copy.deepcopy(term))))
+            out.append(compile(tree, "<expression>", "eval"))
+        return out
+
+
+class _AsFloats(ast.NodeTransformer):
+    """Numbers as floats (as the tree walk reads them: 2**-1 is 0.5, not an int power)."""
+
+    def visit_Constant(self, node):
+        return ast.copy_location(ast.Constant(float(node.value)), node)
+
+
+#: The names a compiled expression sees besides x, y, z, t.
+_NUMPY_NAMESPACE = {
+    "__builtins__": {}, "sin": np.sin, "cos": np.cos, "tan": np.tan, "exp": np.exp, "log": np.log, "sqrt": np.sqrt,
+    "abs": np.abs, "ifpos": lambda a, b, c: np.where(np.asarray(a) > 0, b, c),
+    **{name: float(value) for name, value in CONSTANTS.items()},
+}
 
 
 def _walk(node, env, funcs, const):

