@@ -34,7 +34,7 @@ def test_archive_metadata_survives_the_round_trip(tmp_path):
             assert coord.attrs.get("long_name") and "units" in coord.attrs, name
 
 
-def test_generic_block_is_not_locked_and_p1_on_a_thin_body_warns():
+def test_generic_block_is_not_locked_and_p1_on_a_thin_body_warns(tmp_path):
     """The generic block defaults to P2 (its P1 default was ~50 % locked); P1 asked for on a thin generic body
     warns; the paper presets keep the paper's P1 and say nothing."""
     assert workbench.scene("block")["order"] == 2
@@ -48,6 +48,12 @@ def test_generic_block_is_not_locked_and_p1_on_a_thin_body_warns():
             warnings.simplefilter("always")
             workbench.run(name, h=0.1, k=0.02, T=0.04, progress=False)
         assert not any("lock" in str(w.message) for w in caught), name
+    # nor when the paper's P1 comes back from an archive (a restart gives every value explicitly)
+    path = workbench.write(workbench.run("tp4", h=0.1, k=0.02, T=0.04, progress=False), tmp_path / "tp4.nc")
+    with warnings.catch_warnings(record=True) as caught:
+        warnings.simplefilter("always")
+        workbench.run(restart=path, T=0.08, progress=False)
+    assert not any("lock" in str(w.message) for w in caught)
 
 
 def test_figures_say_what_they_show(tmp_path):

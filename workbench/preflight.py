@@ -82,7 +82,8 @@ def warnings_for(scene, model) -> list:
     was 50 % low at h = 0.05)."""
     out = []
     g = model.geometry
-    paper = scene.base in PAPER_P1 and "order" not in scene.set_by_user
+    # (the paper's own P1 on its presets, however it was given: by default, explicitly, or from a restarted archive)
+    paper = scene.base in PAPER_P1 and scene["order"] == 1
     if g.dim >= 2 and scene["order"] == 1 and model.kind == "A" and not paper and g.aspect() <= 0.25:
         out.append(f"{scene.name}: P1 elements on a thin body (thickness / length = {g.aspect():.2g}) lock in bending, "
                    "so displacements come out too small (the block at h = 0.05: 50 %; the slab at h = 0.0125: 5 %); "
