@@ -212,3 +212,17 @@ def test_compiled_expressions_equal_the_tree_walk_bitwise(text):
         want = walked[0] if len(walked) == 1 else np.stack([np.broadcast_to(w, np.broadcast(*walked).shape)
                                                             for w in walked])
         assert np.array_equal(got, want, equal_nan=True), (text, got, want)
+
+
+def test_expressions_pickle_after_use():
+    """Scenes travel to study workers by pickle: an expression that has been evaluated (and so compiled) pickles,
+    and evaluates alike after the trip."""
+    import pickle
+
+    expr = parse("(0, 5*t*ifpos(x - 0.5, 1, 0))", allowed=("x", "y", "z", "t"))
+    before = expr(x=np.array([0.2, 0.7]), t=0.3)
+    again = pickle.loads(pickle.dumps(expr))
+    assert again.source == expr.source and np.array_equal(again(x=np.array([0.2, 0.7]), t=0.3), before)
+    sc = workbench.scene("tp5")
+    workbench.run(sc, h=0.1, k=0.05, T=0.1, progress=False)
+    pickle.loads(pickle.dumps(sc))

@@ -213,7 +213,7 @@ def test_an_archive_without_state_is_a_named_error(archives, tmp_path):
     plain = workbench.write(without_state(workbench.load(archives["tp5"])), tmp_path / "plain.nc")
     with pytest.raises(NoRestartState, match="has no restart state: it was written before"):
         workbench.run(restart=plain, progress=False)
-    older = ROOT / "data" / "reproduction" / "tp1.nc"  # archived before restart states existed
+    older = ROOT / "data" / "refinement" / "rod_tp1.nc"  # a study's archive, written before restart states existed
     with pytest.raises(NoRestartState, match="has no restart state"):
         workbench.run(restart=older, progress=False)
     with pytest.raises(workbench.Diverged) as err, pytest.warns(RuntimeWarning, match="allow_unstable"):

@@ -114,6 +114,12 @@ class Expression:
     def __str__(self) -> str:
         return self.source
 
+    def __getstate__(self):  # (pickled to study workers: code objects do not pickle; they are compiled again there)
+        return {k: v for k, v in self.__dict__.items() if k != "_compiled"}
+
+    def __setstate__(self, state):
+        self.__dict__.update(state)
+
     @functools.cached_property
     def _compiled(self) -> list:
         """The checked trees compiled once, numbers as floats (what the tree walk :func:`_walk` computes, operation
