@@ -108,6 +108,8 @@ class Expression:
         if len(parts) == 1:
             value = parts[0]
             return float(value) if np.ndim(value) == 0 else np.asarray(value, dtype=float)
+        if all(np.ndim(p) == 0 for p in parts):  # a load's g(t) every step: no broadcasting to do
+            return np.array([float(p) for p in parts])
         shape = np.broadcast(*parts).shape
         return np.stack([np.broadcast_to(np.asarray(p, dtype=float), shape) for p in parts])
 
