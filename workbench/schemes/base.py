@@ -33,11 +33,16 @@ the state u, v and, for Model A, beta) from one time to the next. The time loop
     The scaled local error of the step just taken (<= 1: acceptable), from the
     difference to a predictor of the scheme's order; ``None`` when the history is
     too short to tell.
-``event(state) -> float or None``
+``event(state) -> (theta or None, crossed)``
     Where in the step just taken (0 < theta <= 1 of its length) the first event
     happened: a kink crossed (a contact point or node changing branch, debonding
     starting, beta reaching 0) by :data:`EVENT_FRACTION` of the contact boundary,
-    measured against ``state`` (the state at the step's start); None without one.
+    measured against ``state`` (the state at the step's start), None without one;
+    and ``crossed``, the largest share of the boundary whose laws switched inside the
+    step (0 for a scheme whose estimate does not see kinks).
+``admissible_step(k) -> float``
+    The step (<= k) an error-controlled run takes instead of k: k itself, or for BDF2
+    the step whose a0 lies on its grid (so that factorisations are met again).
 ``diagnostics() -> dict``
     Scalars of the last step (or of ``start``), recorded by name (units in
     :data:`workbench.results.VARIABLES`).
