@@ -22,3 +22,17 @@ def test_banded_matches_sparsecholesky(name, kw):
     K = solvers.to_scipy(d.viscous.mat)
     residual = (K @ out["banded"] - rhs)[free]
     assert np.abs(residual).max() < 1e-9 * np.abs(rhs).max()
+
+
+def test_auto_takes_the_band_only_when_it_is_narrow_and_small(monkeypatch):
+    """auto: the thin slab's narrow band is factored banded; a band that would need more than BAND_BYTES of storage
+    (3D: it grows like n^(5/3); the P2 block at 118k dofs needed 2.2 GB, 4.6 GB peak) goes to the sparse factor."""
+    d = discretisation.build(workbench.scene("slab", h=0.05))
+    K = solvers.to_scipy(d.viscous.mat)
+    free = np.nonzero(np.array(d.fes.FreeDofs(), dtype=bool))[0]
+    _, bandwidth = solvers.rcm(K, free)
+    band = 8.0 * (bandwidth + 1) * free.size
+    assert solvers.factor(d.viscous.mat, d.fes.FreeDofs(), d.u.vec).name == "banded"
+    monkeypatch.setattr(solvers, "BAND_BYTES", 0.5 * band)
+    assert solvers.factor(d.viscous.mat, d.fes.FreeDofs(), d.u.vec).name == "sparsecholesky"
+    assert solvers.factor(d.viscous.mat, d.fes.FreeDofs(), d.u.vec, "banded").name == "banded"  # asked for: kept
