@@ -226,3 +226,27 @@ def test_an_archive_without_state_is_a_named_error(archives, tmp_path):
     p = subprocess.run([sys.executable, "-m", "workbench.cli", "run", "--restart", str(plain), "--no-progress"],
                        capture_output=True, text=True)
     assert p.returncode == 2 and len(p.stderr.strip().splitlines()) == 1 and "no restart state" in p.stderr
+
+
+def test_longer_T_is_refused_for_a_fitted_kernel_and_said_for_error_control(tmp_path):
+    """Tried as a user would, on cases unlike the others (a loaded start, a power-law kernel, error control):
+    an exponential-sum kernel is fitted on [0, T], so its memory histories do not continue to a longer T (continued
+    anyway, u was 1 % off): refused, naming the fit; the quadrature of the same kernel continues bitwise. An
+    error-controlled run landed on its own T, which a run straight to a longer T does not: continued, it warns that
+    it is not bitwise (and stays within the tolerance's reach of the straight run)."""
+    kw = dict(memory_rule="trapezoid", prony=(), kernel="(1 + t/0.05)**(-1.5)", kernel_E=-1000.0, kernel_nu=0.3,
+              h=0.25, k=0.05, traction_top="(0, -20 - 10*t)", progress=False)
+    fitted = workbench.write(workbench.run("memory_slab", T=0.5, kernel_approximation="exponentials", **kw),
+                             tmp_path / "fitted.nc")
+    with pytest.raises(workbench.ParameterError, match="fitted on \\[0, 0.5\\]"):
+        workbench.run(restart=fitted, T=1.0, progress=False)
+    quad = workbench.write(workbench.run("memory_slab", T=0.5, **kw), tmp_path / "quad.nc")
+    a, b = workbench.run(restart=quad, T=1.0, progress=False), workbench.run("memory_slab", T=1.0, **kw)
+    assert np.array_equal(a.u_contact, b.u_contact) and np.array_equal(a.contact_state, b.contact_state)
+    slab = dict(scheme="bdf2", rtol=1e-3, k=0.02, order=2, h=0.1, traction_top="(0, 2 + 5*t)", progress=False)
+    adaptive = workbench.write(workbench.run("slab", T=0.3, **slab), tmp_path / "adaptive.nc")
+    with pytest.warns(RuntimeWarning, match="landed on its own T = 0.3"):
+        c = workbench.run(restart=adaptive, T=0.6, progress=False)
+    d = workbench.run("slab", T=0.6, **slab)
+    tip = lambda ds: float(ds.u_probe.isel(probe=-1, time=-1).sel(component="y"))  # noqa: E731
+    assert abs(tip(c) - tip(d)) <= 1e-3 * abs(tip(d))

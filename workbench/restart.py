@@ -282,6 +282,17 @@ def check(path, archive: xr.Dataset, state: dict, scene, model_terms) -> None:
                              f"the output options (checkpoint_every, snapshots after t = {t:g} s): start a new run for "
                              "other values")
     check_time(path, state, scene["T"])
+    longer = scene["T"] > old["T"] * (1 + 1e-12)
+    if longer and scene.values.get("kernel_approximation") == "exponentials":
+        # the Prony histories belong to the exponentials fitted on [0, old T]; a longer T fits others
+        raise ParameterError(f"restart {str(path)!r}: its kernel is a sum of exponentials fitted on [0, {old['T']:g}] s "
+                             f"(kernel_approximation = 'exponentials'), and T = {scene['T']:g} would need another fit, "
+                             "whose memory histories the archive does not hold: run again from 0 to the new T (or with "
+                             "the quadrature)")
+    if longer and scene.values.get("rtol", 0) > 0 and archive.attrs.get("status") != "checkpoint":
+        warnings.warn(f"restart {str(path)!r}: the error-controlled run landed on its own T = {old['T']:g} s, which a "
+                      f"run straight to T = {scene['T']:g} does not: the continued steps differ from that run's (the "
+                      "result meets the same tolerance, not bitwise)", RuntimeWarning, stacklevel=3)
     a = archive.attrs
     now = results.versions()
     changed = [f"{k[8:]} {a[k]} -> {now[k]}" for k in ("version_workbench", "version_ngsolve")
