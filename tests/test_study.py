@@ -409,3 +409,14 @@ def test_case_files_are_keyed_by_scheme_options_and_versions(tmp_path):
     other = dict(expected, workbench="0.0.0+other")
     ds, reason = read_case(path, other)
     assert ds is None and "workbench" in reason and "0.0.0+other" in reason
+
+
+def test_a_finer_run_reference_of_a_tolerance_sweep_takes_fixed_steps():
+    """reference={"k": ...} in an rtol sweep is a fixed-step run at that k (it took the first case's tolerance, so
+    every case was compared with an error-controlled run of rtol 1e-2)."""
+    st = Study("tp5", h=[0.1], k=[0.02], sweep={"rtol": [1e-2, 1e-3]}, scheme="bdf2", reference={"k": 0.001}, T=0.1,
+               workers=0)
+    (ref,) = st.reference.cases()
+    assert ref.values()["rtol"] == 0.0 and ref.k == 0.001
+    assert Study("tp5", h=[0.1], k=[0.02], sweep={"rtol": [1e-2]}, scheme=["bdf2", "implicit"],
+                 reference={"k": 0.001, "rtol": 1e-6}, T=0.1, workers=0).reference.cases()[0].values()["rtol"] == 1e-6

@@ -180,6 +180,8 @@ def make(spec, scene, cases, axes):
         # from the cases, not the axes: a coupled h, k, order or scheme is not an axis
         values = {"h": min(c.h for c in cases), "k": min(c.k for c in cases), "order": max(c.order for c in cases),
                   "scheme": cases[0].scheme}
+        if any("rtol" in c.values() for c in cases):  # a tolerance sweep: the finer run takes fixed steps of its k
+            values["rtol"] = 0.0
         values |= spec
         for name in ("h", "k"):
             if name in spec:
