@@ -8,6 +8,7 @@ import signal
 import subprocess
 import sys
 import time
+import warnings
 
 import ngsolve as ngs
 import numpy as np
@@ -420,3 +421,50 @@ def test_a_finer_run_reference_of_a_tolerance_sweep_takes_fixed_steps():
     assert ref.values()["rtol"] == 0.0 and ref.k == 0.001
     assert Study("tp5", h=[0.1], k=[0.02], sweep={"rtol": [1e-2]}, scheme=["bdf2", "implicit"],
                  reference={"k": 0.001, "rtol": 1e-6}, T=0.1, workers=0).reference.cases()[0].values()["rtol"] == 1e-6
+
+
+def test_a_longer_T_continues_the_archived_cases(tmp_path):
+    """A sweep run again with T doubled continues every archived case (the 2D slab with bonding, its finer-run
+    reference too) from its final state instead of from t = 0: the errors and records equal those of a sweep run
+    straight to the new T (to round-off), and the cost of the result covers both parts. A T whose comparison
+    times the archives do not hold, an error-controlled case and ``extend=False`` are recomputed, saying why."""
+    kw = dict(h=[0.05], k=[0.02, 0.01], reference={"k": 0.005}, workers=0, n_compare=4)
+    cases = tmp_path / "cases"
+    short = Study("tp5", T=0.1, **kw)
+    short.run(cases, progress=False)
+    long = Study("tp5", T=0.2, **kw)
+    with warnings.catch_warnings():
+        warnings.simplefilter("error")  # continuing says nothing
+        extended = long.run(cases, progress=False)
+    assert long.overhead["extended_cases"] == 3 and long.overhead["new_cases"] == 0
+    straight = Study("tp5", T=0.2, **kw).run(tmp_path / "straight", progress=False)
+    for name in ("error", "error_probe", "error_beta", "nsteps"):
+        np.testing.assert_allclose(extended[name].values, straight[name].values, rtol=1e-10, atol=0)
+    assert extended.nsteps.values.ravel().tolist() == [10, 20]
+    one = workbench.load(next(cases.glob("h0.05_k0.01*.nc")))
+    assert one.attrs["case_extended_from_T"] == 0.1 and one.attrs["restart_time"] == 0.1
+    # (the comparison times: 4 equal parts of the common grid of k = 0.02; those up to 0.1 were T = 0.1's too)
+    np.testing.assert_allclose(one.snapshot_time, [0.04, 0.1, 0.16, 0.2], rtol=1e-12)
+    assert one.sizes["time"] == 11 and one.attrs["wall_time"] > 0
+    # the same archive run again: read, not continued again
+    again = Study("tp5", T=0.2, **kw)
+    again.run(cases, progress=False)
+    assert again.overhead["extended_cases"] == 0 and again.overhead["new_cases"] == 0
+    # T = 0.3 puts the comparison times at 0.08, 0.16, 0.22, 0.3: the archives have no field at 0.08
+    with pytest.warns(RuntimeWarning, match=r"no field at the comparison time.*recomputing") as record:
+        odd = Study("tp5", T=0.3, **kw)
+        odd.run(cases, progress=False)
+    assert odd.overhead["new_cases"] == 3 and len([w for w in record if "recomputing" in str(w.message)]) == 3
+    with pytest.warns(RuntimeWarning, match="T 0.3 -> 0.6.*recomputing"):
+        off = Study("tp5", T=0.6, **kw)
+        off.run(cases, progress=False, extend=False)
+    assert off.overhead["new_cases"] == 3 and off.overhead["extended_cases"] == 0
+
+
+def test_an_error_controlled_case_is_not_extended(tmp_path):
+    kw = dict(sweep={"rtol": [1e-2, 1e-3]}, scheme="implicit", reference="exact", workers=0)
+    Study("tp1", T=0.5, **kw).run(tmp_path, progress=False)
+    with pytest.warns(RuntimeWarning, match="error-controlled case is not continued.*recomputing"):
+        st = Study("tp1", T=1.0, **kw)
+        st.run(tmp_path, progress=False)
+    assert st.overhead["new_cases"] == 2

@@ -280,9 +280,11 @@ def cmd_study(args) -> int:
         if found:
             print(f"observed order of {norm}: {found}")
     o = st.overhead
-    if o["new_cases"]:
-        print(f"study: {o['execute']:.1f} s running {o['new_cases']} new case(s) (their own setup + time loops, "
-              f"summed over workers: {o['cases']:.1f} s), {o['evaluate']:.1f} s comparing fields")
+    if o["new_cases"] or o["extended_cases"]:
+        ran = f"{o['new_cases']} new case(s)" + (f" and continuing {o['extended_cases']} archived at a shorter T"
+                                                 if o["extended_cases"] else "")
+        print(f"study: {o['execute']:.1f} s running {ran} (the cases' own setup + time loops, summed over workers: "
+              f"{o['cases']:.1f} s), {o['evaluate']:.1f} s comparing fields")
     outputs = []
     for option, path, draw in (("--plot", args.plot, "convergence"), ("--pareto", args.pareto, "pareto")):
         if path:

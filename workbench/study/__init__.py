@@ -27,7 +27,7 @@ from .. import results, scenes
 from ..errors import ParameterError
 from ..results import attr_value
 from . import evaluate, execute, reference
-from .cases import BASE_AXES, Case, canonical, expand, fingerprint, inputs, positive_int, read_case
+from .cases import BASE_AXES, Case, canonical, expand, extension, fingerprint, inputs, positive_int, read_case
 from .evaluate import fit_order
 
 __all__ = ["Study", "Case", "cheapest", "fit_order"]
@@ -162,12 +162,20 @@ class Study:
         return [0.0] + list(compare) if self._adaptive(case) else list(record)
 
     # -- running ---------------------------------------------------------------------------------------
-    def run(self, archive=None, *, progress=None) -> xr.Dataset:
+    def run(self, archive=None, *, progress=None, extend=True) -> xr.Dataset:
         """Run the cases that have no valid archive (each archived on completion in ``archive``), then evaluate.
 
         With ``archive`` (a folder), a sweep that was interrupted and is run again
         recomputes only the cases whose archive is missing, unreadable or made from
         other inputs (each such case is reported); the result is identical.
+
+        A sweep run again with a longer T continues each case archived there from its
+        final state (``extend``, default True; :func:`.cases.extension` says when a
+        case can be): the cases' records up to the old T are reused, and the result
+        equals that of a sweep run straight to the new T to round-off (the steps up
+        to the old T were placed on that T's grid). Keep the old comparison times by
+        taking a multiple of the old T (they are n_compare equal parts of [0, T]).
+        ``extend=False`` recomputes such cases from t = 0.
         """
         from tqdm.auto import tqdm
 
@@ -175,20 +183,28 @@ class Study:
         archive = Path(archive) if archive is not None else Path(tempfile.mkdtemp(prefix="workbench-study-"))
         archive.mkdir(parents=True, exist_ok=True)
         todo = list(dict.fromkeys(self.listed + (self.reference.cases() if self.reference else [])))
-        runs, missing, expected = {}, [], {}
+        runs, missing, expected, plans = {}, [], {}, {}
         for case in todo:
             expected[case] = inputs(self.scene_of(case, compare), self._record_times(case, record, compare), compare)
-            ds, reason = read_case(archive / f"{case.key}.nc", expected[case])
+            path = archive / f"{case.key}.nc"
+            ds, reason = read_case(path, expected[case])
             if ds is not None:
                 runs[case] = ds
-            else:
-                if reason:
-                    warnings.warn(f"study case {archive / (case.key + '.nc')}: {reason}; recomputing it",
-                                  RuntimeWarning, stacklevel=2)
-                missing.append(case)
+                continue
+            if reason and extend:
+                plan, why = extension(path, expected[case])
+                if plan is not None:
+                    plans[case] = plan
+                    missing.append(case)
+                    continue
+                reason = f"{reason} ({why})" if why else reason
+            if reason:
+                warnings.warn(f"study case {path}: {reason}; recomputing it", RuntimeWarning, stacklevel=2)
+            missing.append(case)
         missing.sort(key=self._cost_estimate, reverse=True)  # biggest first, so the pool ends evenly
         tasks = [(c, (self.scene, c.values(), self._record_times(c, record, compare), list(compare),
-                      {"case_inputs": canonical(expected[c]), "case_fingerprint": fingerprint(expected[c])}))
+                      {"case_inputs": canonical(expected[c]), "case_fingerprint": fingerprint(expected[c])},
+                      plans.get(c)))
                  for c in missing]
         if self.client is not None:
             stream = execute.on_cluster(tasks, self.client)
@@ -209,8 +225,8 @@ class Study:
         executed = time.perf_counter() - t0
         self.dataset = self._evaluate(runs, compare)
         case_cost = float(np.nansum(self.dataset["wall_time"]) + np.nansum(self.dataset["setup_time"]))
-        self.overhead = dict(execute=executed, cases=case_cost, new_cases=len(missing),
-                             evaluate=time.perf_counter() - t0 - executed)
+        self.overhead = dict(execute=executed, cases=case_cost, new_cases=len(missing) - len(plans),
+                             extended_cases=len(plans), evaluate=time.perf_counter() - t0 - executed)
         return self.dataset
 
     def _cost_estimate(self, case):

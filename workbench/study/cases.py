@@ -29,6 +29,8 @@ import math
 import re
 from pathlib import Path
 
+import numpy as np
+
 from ..parameters import ParameterError
 
 #: The axes every study has (length 1 when not swept), in dimension order.
@@ -204,6 +206,63 @@ def read_case(path: Path, expected: dict):
     if ds.attrs.get("case_fingerprint") == fingerprint(expected):
         return ds, None
     return None, "made with other inputs: " + differences(json.loads(stored), expected)
+
+
+#: What may differ between a shorter run and a case that continues it (extension of T).
+_EXTENDED = ("T", "snapshots")
+
+
+def extension(path: Path, expected: dict):
+    """(plan, None) if the case archived at ``path`` can be continued to the case of ``expected`` (a longer T,
+    all else equal); else (None, reason).
+
+    The continued case is the restart of the archived run (:mod:`workbench.restart`) to the new T, recording the
+    old records and the new ones after the old T. It is possible when the archive holds its final state, its run
+    took fixed steps (an error-controlled run landed on its own T, which a run straight to the new T does not),
+    its record times are those of the new case up to the old T and its snapshots include the new case's
+    comparison times there. The plan: ``restart`` (the path), ``T`` (the archive's), ``snapshots`` and
+    ``record_times`` for the continued run (the archive's up to its T, the new case's after), ``keep`` (the new
+    case's snapshot times).
+    """
+    from .. import restart, results
+
+    try:
+        ds = results.load(path)
+        old = json.loads(ds.attrs["case_inputs"])
+    except Exception:  # noqa: BLE001 (read_case has said why the file is not this case)
+        return None, None
+    a, b = old.get("scene", {}), expected["scene"]
+    T0, T = float(a.get("T", np.inf)), float(b["T"])
+    others = [k for k in set(old) | set(expected) if k not in ("scene", "record_times", "snapshots")
+              and canonical(old.get(k)) != canonical(expected.get(k))]
+    others += [k for k in set(a) | set(b) if k not in _EXTENDED and canonical(a.get(k)) != canonical(b.get(k))]
+    if others or not T0 < T:
+        return None, None
+    tol = 1e-9 * max(1.0, T)
+    if float(b.get("rtol", 0.0)) > 0:
+        return None, "an error-controlled case is not continued to a longer T (its steps landed on its own T)"
+    if b.get("kernel_approximation") == "exponentials":
+        return None, "its kernel's exponential sum was fitted on [0, T], another fit for the longer T"
+    if not restart.has_state(ds) or ds.attrs.get("status") != "complete":
+        return None, "its archive holds no state to continue from"
+    new_records = np.asarray(expected["record_times"], dtype=float)
+    old_records = np.asarray(old["record_times"], dtype=float)
+    before = new_records[new_records <= T0 + tol]
+    if before.size != old_records.size or np.abs(before - old_records).max(initial=0.0) > tol:
+        return None, f"its record times up to its T = {T0:g} are not the longer case's"
+    stored = ds.snapshot_time.values if "snapshot_time" in ds.coords else np.array([])
+    wanted = [t for t in expected["snapshots"] if t <= T0 + tol]
+    missing = [t for t in wanted if stored.size == 0 or np.abs(stored - t).min() > tol]
+    if missing:
+        return None, (f"it has no field at the comparison time(s) {', '.join(f'{t:g}' for t in missing[:3])} s (the "
+                      f"comparison times move with T: a multiple of its T = {T0:g} keeps them)")
+    # the run's own snapshot times up to T0 (a restart must keep them), which may be more than its fields kept
+    own = json.loads(ds.attrs["parameters_json"]).get("snapshots", [])
+    return {"restart": str(path), "T": T0,
+            "snapshots": [float(t) for t in own if t <= T0 + tol] + [float(t) for t in expected["snapshots"]
+                                                                      if t > T0 + tol],
+            "record_times": [float(t) for t in old_records] + [float(t) for t in new_records if t > T0 + tol],
+            "keep": [float(t) for t in expected["snapshots"]]}, None
 
 
 def differences(old: dict, new: dict, limit: int = 6) -> str:

@@ -20,16 +20,18 @@ import selectors
 import struct
 import subprocess
 import sys
+import warnings
 
 _HEADER = struct.Struct(">Q")
 
 
-def run_case(scene, case_values, record_times, snapshots, extra_attrs):
+def run_case(scene, case_values, record_times, snapshots, extra_attrs, extend=None):
     """Run one case (in whatever process this is).
 
     A diverged case returns its partial Dataset (``status = "incomplete"``); a case the explicit scheme
     refuses (k above its predicted k_crit) returns an empty Dataset with ``status = "refused"``: in a
-    sweep these are results, not errors.
+    sweep these are results, not errors. With ``extend`` (a plan of :func:`.cases.extension`) the case
+    continues the archived run of a shorter T, and keeps the fields at its own snapshot times only.
     """
     import xarray as xr
 
@@ -37,9 +39,18 @@ def run_case(scene, case_values, record_times, snapshots, extra_attrs):
     from ..runner import run
 
     _peak_memory_reset()  # workers are reused: the peak must be this case's
+    restart = None
+    if extend is not None:
+        snapshots, record_times, restart = extend["snapshots"], extend["record_times"], extend["restart"]
     sc = scene.with_(snapshots=tuple(snapshots), **case_values)
     try:
-        ds = run(sc, progress=False, record_times=record_times)
+        with warnings.catch_warnings():
+            if extend is not None:  # (the study states that extended cases equal straight runs to round-off)
+                warnings.filterwarnings("ignore", message=r".*differ from those of the grid.*by round-off")
+            ds = run(sc, progress=False, record_times=record_times, restart=restart)
+        if extend is not None:
+            ds = _keep_snapshots(ds, extend["keep"])
+            ds.attrs["case_extended_from_T"] = extend["T"]
     except Diverged as err:
         ds = err.dataset
     except StepTooLarge as err:
@@ -49,6 +60,17 @@ def run_case(scene, case_values, record_times, snapshots, extra_attrs):
     ds.attrs["memory_peak_mb"] = _peak_memory_mb()
     ds.attrs.update(extra_attrs)
     return ds
+
+
+def _keep_snapshots(ds, times):
+    """``ds`` with the field snapshots at ``times`` only (to round-off)."""
+    import numpy as np
+
+    if "snapshot_time" not in ds.coords:
+        return ds
+    t = ds.snapshot_time.values
+    keep = [i for i in range(t.size) if np.min(np.abs(np.asarray(times) - t[i])) <= 1e-9 * max(1.0, abs(t[i]))]
+    return ds.isel(snapshot=keep)
 
 
 def _peak_memory_reset() -> bool:
