@@ -68,6 +68,7 @@ class ContactSide:
             self.T_nu = sp.csr_matrix(([geometry.normal_sign], ([0], [dof])), shape=(1, fes.ndof))
             self.T_tau = []
             self.element = np.zeros(1, dtype=np.int64)
+            self.gap0 = None
             return
         irs = ngs.comp.IntegrationRuleSpaceSurface(mesh, order=rule, definedon=region)
         rules = irs.GetIntegrationRules()
@@ -92,6 +93,16 @@ class ContactSide:
             traces.append((sp.diags(1.0 / w[points]) @ M[points]).tocsr())  # M = diag(w) T
         self.weights = w[points]
         self.element = owner[points]
+        self.gap0 = None  # the initial gap at the points of a curved contact side (None: flat, on the foundation)
+        if geometry.curved:
+            xyz = []
+            for c in (ngs.x, ngs.y, ngs.z)[: self.dim]:
+                lf = ngs.LinearForm(irs)
+                lf += c * v * ngs.ds(name, intrules=rules)
+                lf.Assemble()
+                xyz.append(lf.vec.FV().NumPy()[points] / self.weights)
+            self.xyz = np.stack(xyz, axis=1)
+            self.gap0 = geometry.gap0(self.xyz)
         self.T_nu = (geometry.normal_sign * traces[geometry.normal_axis]).tocsr()
         self.T_tau = [traces[a] for a in geometry.facet_axes]
 
@@ -126,7 +137,7 @@ class RestrictedSide:
 
     def __init__(self, side: ContactSide, dofs: np.ndarray):
         self.side, self.dofs = side, np.asarray(dofs)
-        self.weights, self.element = side.weights, side.element
+        self.weights, self.element, self.gap0 = side.weights, side.element, side.gap0
         self.T_nu = side.T_nu[:, self.dofs].tocsr()
         self.T_tau = [T[:, self.dofs].tocsr() for T in side.T_tau]
 

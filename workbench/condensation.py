@@ -55,14 +55,14 @@ class ContactOperator:
     def force(self, u_C: np.ndarray) -> np.ndarray:
         """f(u_C): the contact nodal forces (as they enter the residual) on C."""
         beta = self._beta()
-        p = self.contact.normal(NP, self.side.u_nu(u_C), beta)
+        p = self.contact.normal(NP, self.side.u_nu(u_C), beta, self.side.gap0)
         q = self.contact.tangential_traction(NP, self.side.u_tau(u_C), beta) if self.tangential else None
         return self.side.integrate(p, q)
 
     def jacobian(self, u_C: np.ndarray) -> np.ndarray:
         """df/du_C as a dense |C| x |C| matrix (semismooth: the active branch of each kink)."""
         beta = self._beta()
-        slope = self.contact.normal_slope(self.side.u_nu(u_C), beta)
+        slope = self.contact.normal_slope(self.side.u_nu(u_C), beta, self.side.gap0)
         tslope = self.contact.tangential_slope(self.side.u_tau(u_C), beta) if self.tangential else None
         return self.side.jacobian(slope, tslope)
 

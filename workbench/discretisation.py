@@ -196,7 +196,10 @@ class Discretisation:
         w = self.fes.TestFunction()
         u_nu, u_tau = self._normal_and_tangential(self.u)
         w_nu, w_tau = self._normal_and_tangential(w)
-        integrand = contact.integrand(u_nu, u_tau, self.beta, w_nu, w_tau)
+        gap0 = None
+        if self.geometry.curved:  # the initial gap as a coefficient function (the distance to the foundation)
+            gap0 = (ngs.x, ngs.y, ngs.z)[self.geometry.normal_axis]
+        integrand = contact.integrand(u_nu, u_tau, self.beta, w_nu, w_tau, gap0)
         if integrand is None:
             return None
         form = ngs.LinearForm(self.fes)
@@ -225,10 +228,10 @@ class Discretisation:
 
 
 def _vector_space(geometry, mesh, order):
-    clamp = geometry.boundaries["clamp"]
+    flags = geometry.dirichlet_flags()
     if geometry.dim == 1:
-        return ngs.H1(mesh, order=order, dirichlet=clamp)
-    return ngs.VectorH1(mesh, order=order, dirichlet=clamp)
+        return ngs.H1(mesh, order=order, **flags)
+    return ngs.VectorH1(mesh, order=order, **flags)
 
 
 def _vertex_dofs(fes, dim, nv):

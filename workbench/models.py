@@ -94,7 +94,7 @@ def _viscous(v, dim):
 
 
 def _loads(values, geometry) -> Loads:
-    return Loads(tractions={side: values[f"traction_{side}"] for side in geometry.loadable},
+    return Loads(tractions=geometry.tractions(values),
                  body_force=values.get("body_force"), point_force=values.get("point_force"),
                  point_force_at=tuple(values.get("point_force_at", ())), delta=values.get("delta"),
                  u0=values.get("u0"))

@@ -58,6 +58,10 @@ class Param:
             return "true | false"
         if self.kind in ("expr", "vector"):
             return "expression in " + ", ".join(self.variables)
+        if self.kind == "text":
+            return "text"
+        if self.kind == "mapping":
+            return "a table name = role"
         if self.lower is None and self.upper is None:
             return "any finite number" if self.kind in ("float", "int") else ""
         parts = []
@@ -120,6 +124,12 @@ class Param:
             return _times(name, value)
         if self.kind == "matrix":
             return _matrix(name, value)
+        if self.kind == "text":
+            if not isinstance(value, str):
+                raise ParameterError(f"{name} = {value!r}: give text (a file path)")
+            return value
+        if self.kind == "mapping":
+            return _mapping(name, value)
         raise AssertionError(self.kind)
 
 
@@ -179,6 +189,25 @@ def _matrix(name, value):
     return rows
 
 
+def _mapping(name, value):
+    """A mapping of names to text (the roles of a mesh's boundaries), sorted by name; JSON text is read too."""
+    if isinstance(value, str):
+        try:
+            value = json.loads(value) if value.strip() else {}
+        except json.JSONDecodeError:
+            raise ParameterError(f"{name} = {value!r}: give a table of name = value, e.g. "
+                                 '{"bottom": "contact", "left": "clamped"}') from None
+    if isinstance(value, (list, tuple)):
+        try:
+            value = dict(value)
+        except (TypeError, ValueError):
+            raise ParameterError(f"{name} = {value!r}: expected a table of name = value") from None
+    if not isinstance(value, dict) or not all(isinstance(k, str) and isinstance(v, str) for k, v in value.items()):
+        raise ParameterError(f"{name} = {value!r}: expected a table of names to text, e.g. "
+                             '{"bottom": "contact", "left": "clamped"}')
+    return dict(sorted(value.items()))
+
+
 def _p(name, default, unit, meaning, kind="float", **kw) -> Param:
     return Param(name, default, unit, meaning, kind, **kw)
 
@@ -198,6 +227,15 @@ PARAMETERS: dict[str, Param] = {p.name: p for p in [
     _p("ny", 0, "1", "cells along y; 0 = from h", "int", lower=0),
     _p("nz", 0, "1", "cells along z (3D); 0 = from h", "int", lower=0),
     _p("order", 1, "1", "polynomial order of the displacement elements", "int", lower=1, upper=4),
+    _p("mesh", "", "", "the body's mesh file (gmsh .msh or netgen .vol; in Python also a netgen/OCC geometry or a "
+       "mesh, stored as a file)", "text"),
+    _p("boundaries", {}, "", "the role of every boundary of the mesh: clamped, traction, contact or free",
+       "mapping"),
+    _p("mesh_digest", "", "", "sha256 of the mesh file's content (set from the file: results and caches are keyed "
+       "by it)", "text"),
+    _p("radius", 1.0, "m", "radius of the Hertz body (half-disc or hemisphere)", **_POS),
+    _p("h_contact", 0.0, "m", "element size at the Hertz body's contact point, graded to h away from it; 0 = h / 10",
+       **_NONNEG),
     # time
     _p("T", 1.0, "s", "final time", **_POS),
     _p("k", 0.01, "s", "time step (uniform grid; the last step is not longer than k)", **_POS),
@@ -263,6 +301,9 @@ PARAMETERS: dict[str, Param] = {p.name: p for p in [
     _p("u0", "0", "m", "initial displacement (rod: must equal delta(0) at x = 0)", "expr", variables=("x", "y", "z")),
     _p("body_force", "0", "N/m^3", "volume force f0", "vector", variables=("x", "y", "z", "t")),
     _p("traction_top", "0", "N/m^2", "traction on the top side", "vector"),
+    _p("traction", "0", "N/m^2", "traction on every boundary of a mesh body with the role traction", "vector"),
+    _p("load", "10*t", "N", "Hertz bodies: the total force pressing the flat side towards the foundation "
+       "(per unit thickness in 2D), spread uniformly over it", "expr", variables=("t",)),
     _p("traction_right", "0", "N/m^2", "traction on the right side (x = width)", "vector"),
     _p("traction_front", "0", "N/m^2", "traction on the front side (y = 0, 3D)", "vector"),
     _p("traction_back", "0", "N/m^2", "traction on the back side (y = depth, 3D)", "vector"),

@@ -46,6 +46,9 @@ _TIME_B = ("T", "k", "scheme", "order", "h", "solver") + _ADAPTIVE
 _UNILATERAL = ("gap", "F", "c")
 _MEMORY = ("kernel", "kernel_E", "kernel_nu", "prony", "memory_rule", "kernel_approximation", "kernel_tol")
 _LOADS = ("body_force", "point_force", "point_force_at")
+_MESH = ("mesh", "boundaries", "mesh_digest")
+_HERTZ = ("radius", "h_contact")
+_HERTZ_LOADS = ("body_force", "load")
 
 
 def _geometry_parameters(kind: str) -> tuple:
@@ -70,7 +73,22 @@ MODEL_PARAMETERS = {
                    + _MEMORY + _loads("slab") + _OUTPUT,
     ("block", "B"): _geometry_parameters("block") + _TIME_B + ("E", "nu", "elastic_tensor") + _UNILATERAL + _MEMORY
                     + _loads("block") + _OUTPUT,
+    ("mesh2d", "A"): _MESH + _TIME + ("plane",) + _KV + _CONTACT + ("c_tau",) + _LOADS + ("traction",) + _OUTPUT,
+    ("mesh3d", "A"): _MESH + _TIME + _KV + _CONTACT + ("c_tau",) + _LOADS + ("traction",) + _OUTPUT,
+    ("mesh2d", "B"): _MESH + _TIME_B + ("plane", "E", "nu", "elastic_tensor") + _UNILATERAL + _MEMORY + _LOADS
+                     + ("traction",) + _OUTPUT,
+    ("mesh3d", "B"): _MESH + _TIME_B + ("E", "nu", "elastic_tensor") + _UNILATERAL + _MEMORY + _LOADS + ("traction",)
+                     + _OUTPUT,
+    ("halfdisc", "A"): _HERTZ + _TIME + ("plane",) + _KV + _CONTACT + ("c_tau",) + _HERTZ_LOADS + _OUTPUT,
+    ("hemisphere", "A"): _HERTZ + _TIME + _KV + _CONTACT + ("c_tau",) + _HERTZ_LOADS + _OUTPUT,
+    ("halfdisc", "B"): _HERTZ + _TIME_B + ("plane", "E", "nu", "elastic_tensor") + _UNILATERAL + _MEMORY + _HERTZ_LOADS
+                       + _OUTPUT,
+    ("hemisphere", "B"): _HERTZ + _TIME_B + ("E", "nu", "elastic_tensor") + _UNILATERAL + _MEMORY + _HERTZ_LOADS
+                         + _OUTPUT,
 }
+
+#: The scenes whose body is a mesh file, by (dimension, model).
+MESH_SCENES = {(2, "A"): "mesh2d", (3, "A"): "mesh3d", (2, "B"): "memory_mesh2d", (3, "B"): "memory_mesh3d"}
 
 #: Parameters a model refuses with a reason (rather than as merely unknown).
 _NOT_APPLICABLE = {"B": {"u0": "without viscosity the problem is quasistatic in u, so u(0) is the solution of the "
@@ -104,6 +122,25 @@ _MEMORY_2D = dict(width=2.0, height=1.0, h=0.05, k=0.02, T=1.0, E=1000.0, nu=0.3
                   gap=0.02, F=20.0, c=2000.0, prony=((-1000.0, 0.3, 0.5),),
                   traction_top="(0, -60*t*ifpos(x - 1, 1, -0.25))", snapshots=(0.25, 0.5, 0.75, 1.0))
 
+def _kelvin_voigt_of_tau(v):
+    """A = tau G: the viscosity a1 = tau lambda, a2 = 2 tau mu of E, nu (plane strain and 3D: the 3D Lame constants;
+    plane stress: lambda* = 2 lambda mu / (lambda + 2 mu))."""
+    E, nu, tau = v["E"], v["nu"], v["tau"]
+    lam, mu = E * nu / ((1 + nu) * (1 - 2 * nu)), E / (2 * (1 + nu))
+    if v.get("plane") == "stress":
+        lam = 2 * lam * mu / (lam + 2 * mu)
+    return {"a1": tau * lam, "a2": 2 * tau * mu}
+
+
+_TAU = {"tau": Param("tau", 0.05, "s", "Kelvin-Voigt relaxation time: the viscous tensor is tau times the elastic one "
+                     "(sets a1, a2 unless they are given)", lower=0.0)}
+_MESH_A = dict(k=0.01, T=1.0, scheme="implicit", adhesion=False, c_nu=1e4, snapshots=(0.5, 1.0))
+_MESH_B = dict(k=0.25, T=1.0, scheme="vi", gap=0.0, F=0.0, c=0.0, snapshots=(0.5, 1.0))
+_HERTZ_A = dict(radius=1.0, h=0.1, E=1000.0, nu=0.3, plane="strain", contact=True, adhesion=False, c_nu=1e5,
+                gap=0.0, load="10*t", T=1.0, k=0.02, scheme="implicit", snapshots=(0.25, 0.5, 0.75, 1.0))
+_HERTZ_B = dict(radius=1.0, h=0.1, E=1000.0, nu=0.3, plane="strain", gap=0.0, F=0.0, c=0.0, load="10*t", T=1.0,
+                k=0.25, scheme="vi", snapshots=(0.25, 0.5, 0.75, 1.0))
+
 PRESETS: dict[str, Preset] = {
     "rod": Preset("rod", "1D Kelvin-Voigt rod (0, length), end x = 0 moved by delta(t), adhesive contact at x = length",
                   dict(h=0.01, k=0.01, delta="-0.5*t")),
@@ -136,6 +173,24 @@ PRESETS: dict[str, Preset] = {
                            "memory_slab; layer of thickness gap on z = 0",
                            dict(_MEMORY_2D, depth=0.5, h=0.1, traction_top="(0, 0, -60*t*ifpos(x - 1, 1, -0.25))"),
                            model="B"),
+    "mesh2d": Preset("mesh2d", "Model A: a 2D body from a mesh file (mesh, boundaries: clamped / traction / contact / "
+                     "free), foundation y = 0", _MESH_A),
+    "mesh3d": Preset("mesh3d", "Model A: a 3D body from a mesh file, foundation z = 0", _MESH_A),
+    "memory_mesh2d": Preset("mesh2d", "Model B: a 2D body from a mesh file, unilateral contact "
+                            "with a layer of thickness gap on y = 0", _MESH_B, model="B"),
+    "memory_mesh3d": Preset("mesh3d", "Model B: a 3D body from a mesh file, unilateral contact on z = 0", _MESH_B,
+                            model="B"),
+    "hertz": Preset("halfdisc", "Hertz: 2D half-disc of radius R, plane strain, pressed on y = 0 by the total force "
+                    "load (per unit thickness) on its flat top; Kelvin-Voigt with A = tau G, normal compliance c_nu "
+                    "(modelled as its half x >= 0)", _HERTZ_A, extras=_TAU, derive=_kelvin_voigt_of_tau),
+    "hertz3d": Preset("hemisphere", "Hertz: 3D hemisphere of radius R pressed on z = 0 by the total force load on its "
+                      "flat top; Kelvin-Voigt with A = tau G, normal compliance (modelled as its quarter x, y >= 0)",
+                      dict(_HERTZ_A, h=0.25), extras=_TAU, derive=_kelvin_voigt_of_tau),
+    "memory_hertz": Preset("halfdisc", "Model B Hertz: the half-disc of hertz, unilateral contact with a layer of "
+                           "thickness gap (gap = F = c = 0: Signorini), elastic unless a memory is given",
+                           _HERTZ_B, model="B"),
+    "memory_hertz3d": Preset("hemisphere", "Model B Hertz: the hemisphere of hertz3d, unilateral contact (Signorini by "
+                             "default)", dict(_HERTZ_B, h=0.25), model="B"),
 }
 
 
@@ -252,12 +307,21 @@ def make(name: str, overrides: dict | None = None, *, base: str | None = None, d
             raise ParameterError(f"unknown parameter {key!r} for scene {name!r}" + closest_name(key, known))
     raw = {n: p.default for n, p in known.items()} | preset.values | overrides
     if preset.derive is not None:
-        checked_extras = {n: known[n].check(raw[n]) for n in preset.extras}
+        inputs = [n for n in known if n in preset.extras or n in ("E", "nu", "plane")]
+        checked_extras = {n: known[n].check(raw[n]) for n in inputs}
         derived = preset.derive(checked_extras)
         raw |= {k: v for k, v in derived.items() if k not in overrides}
     geometry = GEOMETRIES[preset.geometry]
+    if "mesh" in known:
+        _mesh_values(raw, overrides)
     values = {n: known[n].check(raw[n], size=geometry.dim) for n in known}
     body = geometry.from_values(values)
+    if "mesh" in known:  # a mesh body's element size is its mesh's
+        if "h" in overrides and not math.isclose(float(overrides["h"]), body.h_max(), rel_tol=1e-9):
+            raise ParameterError(f"h = {overrides['h']}: a mesh body's element size is its mesh's (h = "
+                                 f"{body.h_max():.6g}); refine the mesh itself (in Python, give a netgen/OCC geometry "
+                                 "and h: it is meshed with maxh = h)")
+        values["h"] = body.h_max()
     if not values["probes"]:
         values["probes"] = body.default_probes()
     if "snapshots" not in overrides:  # preset snapshot times beyond a shortened T are dropped
@@ -269,6 +333,22 @@ def make(name: str, overrides: dict | None = None, *, base: str | None = None, d
     _check_consistency(name, body, values, preset.model)
     return Scene(name, preset.geometry, values, description or preset.description, frozenset(overrides), base,
                  preset.model, source)
+
+
+def _mesh_values(raw: dict, overrides: dict) -> None:
+    """The mesh file of a mesh body, checked: its absolute path and the digest of its content (``mesh_digest``; one
+    given, as by a restart or an archive, must still be the file's)."""
+    from . import meshes
+
+    if not raw.get("mesh"):
+        raise ParameterError("mesh: give the body's mesh file (a gmsh .msh or netgen .vol), and boundaries, the role of "
+                             "each of its boundaries")
+    path = meshes.check_file(raw["mesh"])
+    found = meshes.digest(path)
+    if raw.get("mesh_digest") and raw["mesh_digest"] != found:
+        raise ParameterError(f"mesh = {str(path)!r}: the file has changed since this scene was made (mesh_digest "
+                             f"{raw['mesh_digest'][:12]}... then, {found[:12]}... now)")
+    raw["mesh"], raw["mesh_digest"] = str(path), found
 
 
 #: Above this many time steps a run is refused (a typing slip such as k = 1e-300 or T = 1e9).
@@ -334,7 +414,8 @@ def _check_expressions(body, v):
                 raise ParameterError(f"in {key} = {_clip(expr.source)}: {extra[0]!r} is not a coordinate of a "
                                      f"{body.kind} (allowed: {', '.join(sorted(coordinates) + ['t'])})")
     times = np.linspace(0.0, v["T"], 11)
-    corners = np.array(np.meshgrid(*[[0.0, 0.5 * e, e] for e in body.extent], indexing="ij")).reshape(body.dim, -1)
+    corners = np.array(np.meshgrid(*[[lo, 0.5 * (lo + hi), hi] for lo, hi in body.bbox], indexing="ij")
+                       ).reshape(body.dim, -1)
     coords = dict(zip("xyz", corners))
     for key, expr in v.items():
         if not isinstance(expr, Expression):
@@ -441,12 +522,33 @@ def _looks_like_path(text: str) -> bool:
     return text.endswith(".toml") or "/" in text or "\\" in text
 
 
-def scene(name_or_path, **overrides) -> Scene:
+def scene(name_or_path=None, *, model=None, **overrides) -> Scene:
     """A scene from a built-in name, a TOML path or an existing :class:`Scene`, with overrides.
 
     A built-in name always means the built-in scene; a file of that name in the working
     directory is read only when given as a path (``./tp1``), and a warning says so.
+
+    Without a name, ``mesh=`` (a mesh file, a netgen/OCC geometry meshed with ``maxh = h``, or
+    an NGSolve/netgen mesh) and ``boundaries={name: role}`` make a body from a mesh: the scene
+    ``mesh2d``/``mesh3d`` (``model="A"``, the default) or ``memory_mesh2d``/``memory_mesh3d``
+    (``model="B"``), by the mesh's dimension.
+
+    >>> from netgen.occ import OCCGeometry, Rectangle, X, Y
+    >>> face = Rectangle(1.0, 0.2).Face()
+    >>> face.edges.Min(Y).name, face.edges.Min(X).name, face.edges.Max(Y).name = "bottom", "left", "top"
+    >>> s = scene(mesh=OCCGeometry(face, dim=2), h=0.1, boundaries={"bottom": "contact", "left": "clamped",
+    ...           "top": "traction", "default": "free"}, traction="(0, -t)")
+    >>> s.name, s.body.boundaries["contact"], s.body.boundaries["traction"], s.body.curved
+    ('mesh2d', 'bottom', ('top',), False)
     """
+    if name_or_path is None or "mesh" in overrides and not isinstance(overrides["mesh"], (str, Path)):
+        if "mesh" not in overrides:
+            raise ParameterError("workbench.scene: give a scene (a built-in name or a .toml file), or mesh=... and "
+                                 "boundaries=... for a body from a mesh")
+        return _mesh_scene(name_or_path, model, overrides)
+    if model is not None:
+        raise ParameterError(f"model = {model!r} applies to a body from a mesh (mesh=...); a built-in scene has its own "
+                             "model")
     if isinstance(name_or_path, Scene):
         return name_or_path.with_(**overrides) if overrides else name_or_path
     text = str(name_or_path)
@@ -458,6 +560,25 @@ def scene(name_or_path, **overrides) -> Scene:
     if _looks_like_path(text) or Path(text).is_file():
         return from_toml(text, overrides)
     return make(text, overrides)
+
+
+def _mesh_scene(name, model, overrides) -> Scene:
+    """The mesh scene of ``overrides["mesh"]`` (a file or a Python mesh/geometry object, stored as a file)."""
+    from . import meshes
+
+    overrides = dict(overrides)
+    mesh = overrides["mesh"]
+    if not isinstance(mesh, (str, Path)):
+        overrides["mesh"] = str(meshes.store(mesh, overrides.pop("h", None)))
+    if name is None:
+        if model not in (None, "A", "B"):
+            raise ParameterError(f"model = {model!r}; allowed: 'A' (Kelvin-Voigt, compliance, adhesion) | 'B' (memory, "
+                                 "unilateral contact)")
+        dim = meshes.read(overrides["mesh"]).dim
+        if dim not in (2, 3):
+            raise ParameterError(f"mesh = {overrides['mesh']!r} is a {dim}D mesh; give a 2D or a 3D one")
+        name = MESH_SCENES[dim, model or "A"]
+    return scene(name, **overrides)
 
 
 __all__ = ["Scene", "scene", "names", "make", "from_toml", "PRESETS", "MODEL_PARAMETERS", "ParameterError"]

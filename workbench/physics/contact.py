@@ -47,6 +47,9 @@ class ContactTerm:
     side = "compression"
     tangential = False
     uses_beta = False
+    #: Whether the law acts on the distance to the foundation, u_nu - g0(x) (the foundation's push), rather than on
+    #: the displacement from the reference state (the glue, stress-free there); the same on a flat contact side.
+    gapped = False
     parameters: tuple = ()
 
     @classmethod
@@ -97,16 +100,20 @@ class Contact:
     def __bool__(self):
         return bool(self.terms)
 
-    def normal(self, ops, u_nu, beta):
+    def normal(self, ops, u_nu, beta, gap0=None):
+        """p_nu, the sum of the terms; ``gap0`` (the initial gap at the points of a curved contact side, None on a
+        flat one) is taken off u_nu for the terms that act on the distance to the foundation."""
         total = None
+        shifted = u_nu - gap0 if gap0 is not None else u_nu
         for t in self.terms:
-            p = t.normal(ops, u_nu, beta)
+            p = t.normal(ops, shifted if t.gapped else u_nu, beta)
             if p is not None:
                 total = p if total is None else total + p
         return total
 
-    def normal_slope(self, u_nu, beta):
-        return sum((t.normal_slope(NP, u_nu, beta) for t in self.terms), np.zeros_like(u_nu))
+    def normal_slope(self, u_nu, beta, gap0=None):
+        shifted = u_nu - gap0 if gap0 is not None else u_nu
+        return sum((t.normal_slope(NP, shifted if t.gapped else u_nu, beta) for t in self.terms), np.zeros_like(u_nu))
 
     def tangential_traction(self, ops, u_tau, beta):
         total = None
@@ -136,12 +143,13 @@ class Contact:
             tangential += s_tau
         return max(normal.values(), default=0.0), tangential
 
-    def integrand(self, u_nu, u_tau, beta, w_nu, w_tau):
-        """The NGSolve integrand of j(beta, u, w) (None when no term gives a traction)."""
+    def integrand(self, u_nu, u_tau, beta, w_nu, w_tau, gap0=None):
+        """The NGSolve integrand of j(beta, u, w) (None when no term gives a traction; ``gap0`` a coefficient
+        function on a curved contact side)."""
         import ngsolve as ngs
 
         out = None
-        p = self.normal(NGS, u_nu, beta)
+        p = self.normal(NGS, u_nu, beta, gap0)
         if p is not None:
             out = p * w_nu
         if u_tau is not None:

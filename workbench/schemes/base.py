@@ -352,7 +352,8 @@ class KelvinVoigtScheme(Scheme):
         w = d.side.weights
         for term in m.contact.terms:
             if hasattr(term, "gap"):
-                groups.append((u_nu - term.gap, w))
+                groups.append(((u_nu - d.side.gap0 if term.gapped and d.side.gap0 is not None else u_nu) - term.gap,
+                               w))
             if term.uses_beta and not term.tangential:
                 groups += [(u_nu, w), (u_nu + term.L, w)]
             if term.tangential and d.side.T_tau:

@@ -77,7 +77,7 @@ class ExplicitEuler(KelvinVoigtScheme):
             side = d.side
             beta_f = self.beta_np[d.beta_dofs] if self.beta_np is not None else None
             beta_q = beta_f[side.element] if beta_f is not None else None
-            p = self.contact.normal(NP, side.u_nu(u), beta_q)
+            p = self.contact.normal(NP, side.u_nu(u), beta_q, side.gap0)
             q = self.contact.tangential_traction(NP, side.u_tau(u), beta_q) if self.tangential else None
             if p is not None or q is not None:
                 self.rhs_np -= side.integrate(p, q)

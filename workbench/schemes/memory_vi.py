@@ -64,6 +64,10 @@ class MemoryVI(Scheme):
         self.C = normal[self.active_nodes]
         self.sign = d.geometry.normal_sign  # u_nu = sign * u_C
         self.w = d.contact_weights[self.active_nodes]
+        # a curved contact side: the layer's law acts on u_nu - g0 (the initial gap at the node; None: flat)
+        self.g0 = d.geometry.gap0(d.node_xyz[self.active_nodes])
+        self.pinned = np.nonzero(~free[normal])[0] if d.geometry.pins_contact else np.zeros(0, dtype=np.int64)
+        self._balance = None  # f - memory of the last equilibrium (only for the reaction of pinned contact nodes)
         self._operators = OrderedDict()
         self.scales = d.memory_scale or [1.0] * len(d.memory)  # (before _use: the step operator needs them)
         self._use(0.0)
@@ -269,6 +273,8 @@ class MemoryVI(Scheme):
         u = d.u.vec.FV().NumPy()
         d.load_vector(time, self.rhs)
         self.rhs_np -= memory
+        if self.pinned.size:
+            self._balance = self.rhs_np.copy()
         if d.moves_clamp:  # u = delta(t_n) at x = 0
             d.lift(time, self.tmp.FV().NumPy())
             self.work.data = self.M * self.tmp
@@ -279,7 +285,11 @@ class MemoryVI(Scheme):
         solves = 1
         if self.C.size:
             s_free = self.sign * self.z[self.C]
+            if self.g0 is not None:  # the layer's law in the distance to the foundation
+                s_free = s_free - self.g0
             s, lam, iterations = self._active_set(s_free, time)
+            if self.g0 is not None:
+                s = s + self.g0
             force = np.zeros(d.ndof)
             force[self.C] = self.sign * lam  # contact forces on the body, in dof direction: -(outward) ...
             out = np.zeros(d.ndof)
@@ -296,9 +306,14 @@ class MemoryVI(Scheme):
             "iterations": iterations, "linear_solves": solves + iterations,
             "n_separated": int(counts[0]), "n_stuck": int(counts[1]), "n_compliant": int(counts[2]),
             "n_rigid": int(counts[3]),
-            "complementarity": self.layer.complementarity(self.sign * u[self.C], self.lam, self.w, self.rho * self.w)
+            "complementarity": self.layer.complementarity(self._distance(u), self.lam, self.w, self.rho * self.w)
             if self.C.size else 0.0,
         }
+
+    def _distance(self, u):
+        """s - g0: the contact nodes' normal displacement less their initial gap (what the layer's law acts on)."""
+        s = self.sign * u[self.C]
+        return s - self.g0 if self.g0 is not None else s
 
     # -- state, events ----------------------------------------------------------------------------------------------
     def _extra_state(self) -> dict:
@@ -321,7 +336,7 @@ class MemoryVI(Scheme):
         """Zeros where a contact node changes state, weighted by the node's boundary measure: s = u_nu
         (separation), s - g (the rigid limit) and lam / w - F (the layer's yield limit, between stuck and
         compliant)."""
-        s = self.sign * u[self.C]
+        s = self._distance(u)
         return [(s, self.w), (s - self.layer.g, self.w), (lam / self.w - self.layer.F, self.w)]
 
     def event(self, start: dict):
@@ -370,7 +385,7 @@ class MemoryVI(Scheme):
         diag = np.diag(S)
         rho = w / diag  # coordinate i: minimise (S_ii / 2) s^2 - y S_ii s + w psi(s) over s <= g -> prox
         layer = self.layer
-        s = np.minimum(self.sign * self.d.u.vec.FV().NumPy()[self.C], layer.g)
+        s = np.minimum(self._distance(self.d.u.vec.FV().NumPy()), layer.g)
         for _ in range(sweeps):
             change = 0.0
             for i in range(len(s)):
@@ -388,10 +403,20 @@ class MemoryVI(Scheme):
 
     def node_values(self) -> dict:
         """Per contact node: the contact pressure lam / w and the state (clamped vertices: NaN / -1)."""
-        n = len(self.d.node_dofs)
+        d = self.d
+        n = len(d.node_dofs)
         pressure, state = np.full(n, np.nan), np.full(n, -1, dtype=np.int64)
         pressure[self.active_nodes] = self.lam / self.w
         state[self.active_nodes] = self.states
+        if self.pinned.size and self._balance is not None:
+            # a vertex held where the contact holds it: its contact force is the support's reaction,
+            # R = (M u - (f - memory)) at its normal dof, pushing the body out of the foundation
+            self.work.data = self.M * d.u.vec
+            dofs = d.normal_dofs[self.pinned]
+            reaction = -self.sign * (self.work.FV().NumPy()[dofs] - self._balance[dofs])
+            weights = d.contact_weights[self.pinned]
+            pressure[self.pinned] = reaction / weights
+            state[self.pinned] = unilateral.STUCK if self.layer.g > 0 or self.layer.F > 0 else unilateral.RIGID
         return {"contact_pressure": pressure, "contact_state": state}
 
     def stress_parts(self) -> list:

@@ -15,6 +15,7 @@ from ..contact import ContactTerm
 
 class NormalCompliance(ContactTerm):
     name, rank = "compliance", 10
+    gapped = True
 
     def __init__(self, c_nu: float, m_nu: float = 1.0, gap: float = 0.0, L: float = 1.0):
         self.c_nu, self.m_nu, self.gap, self.L = float(c_nu), float(m_nu), float(gap), float(L)

@@ -1,0 +1,216 @@
+"""Bodies from files and from netgen geometry: reading meshes with their boundary names.
+
+A scene's body may come from
+
+* a gmsh mesh file (``.msh``, format 2 or 4, read with meshio): its boundary
+  names are the names of its physical groups (an unnamed group is ``bc<tag>``);
+* a netgen mesh file (``.vol``, ``.vol.gz``);
+* in Python, a netgen/OCC geometry (anything with ``GenerateMesh``: ``OCCGeometry``,
+  ``SplineGeometry``, ``CSGeometry``), meshed with ``maxh = h``, or an NGSolve or
+  netgen mesh. These are stored as a netgen mesh file in the user's cache folder,
+  named by its content (:func:`store`), so that a scene stays data: it can be
+  written to an archive, sent to a study worker and restarted.
+
+The scene keeps the file's absolute path and the digest of its content
+(``mesh_digest``), so a changed file is a changed scene for every cache and for
+restart.
+
+Examples
+--------
+>>> from netgen.occ import OCCGeometry, Rectangle, Y
+>>> face = Rectangle(1.0, 0.2).Face()
+>>> face.edges.Min(Y).name = "bottom"
+>>> path = store(OCCGeometry(face, dim=2), h=0.1)
+>>> m = read(path)
+>>> m.dim, sorted(boundary_names(m))
+(2, ['bottom', 'default'])
+"""
+from __future__ import annotations
+
+import hashlib
+import os
+from pathlib import Path
+
+import numpy as np
+
+from .errors import ParameterError
+
+#: File suffixes read as meshes.
+SUFFIXES = (".msh", ".vol", ".vol.gz")
+
+
+def cache_folder() -> Path:
+    """Where meshes made from Python objects are stored (``$WORKBENCH_CACHE`` or ~/.cache/workbench)."""
+    root = os.environ.get("WORKBENCH_CACHE") or os.path.join(os.path.expanduser("~"), ".cache", "workbench")
+    return Path(root) / "meshes"
+
+
+def digest(path) -> str:
+    """sha256 of a file's content (what a cached result made from it is keyed by)."""
+    h = hashlib.sha256()
+    with open(path, "rb") as f:
+        for block in iter(lambda: f.read(1 << 20), b""):
+            h.update(block)
+    return h.hexdigest()
+
+
+def check_file(path, name: str = "mesh") -> Path:
+    """The absolute path of an existing mesh file of a known kind, or a ParameterError naming ``name``."""
+    p = Path(path).expanduser()
+    if not p.exists():
+        raise ParameterError(f"{name} = {str(path)!r}: no such file")
+    if p.is_dir():
+        raise ParameterError(f"{name} = {str(path)!r} is a directory, not a mesh file")
+    if not any(p.name.endswith(s) for s in SUFFIXES):
+        raise ParameterError(f"{name} = {str(path)!r}: unknown mesh format; give a gmsh .msh or a netgen .vol/.vol.gz "
+                             "file (in Python also a netgen/OCC geometry or a mesh object)")
+    return p.resolve()
+
+
+def read(path):
+    """The netgen mesh of a file (boundary names as in the file); ParameterError if it cannot be read."""
+    p = check_file(path)
+    try:
+        if p.name.endswith(".msh"):
+            return _from_gmsh(p)
+        import netgen.meshing as nm
+
+        m = nm.Mesh()
+        m.Load(str(p))
+        return m
+    except ParameterError:
+        raise
+    except Exception as err:  # any failure of the readers: not a mesh we can use
+        raise ParameterError(f"mesh = {str(path)!r} cannot be read as a mesh ({type(err).__name__}: "
+                             f"{str(err).splitlines()[0][:100] if str(err) else 'no detail'})") from None
+
+
+def boundary_names(mesh) -> set:
+    """The names of the boundary regions (codimension 1) that hold elements."""
+    import ngsolve as ngs
+
+    m = mesh if isinstance(mesh, ngs.Mesh) else ngs.Mesh(mesh)
+    return {name for name in m.GetBoundaries()}
+
+
+def store(obj, h: float | None = None) -> Path:
+    """A netgen mesh file in the cache folder for a netgen/OCC geometry (meshed with ``maxh = h``) or a mesh object.
+
+    The file is named by the digest of its content and written atomically, so equal meshes share one file.
+    """
+    import ngsolve as ngs
+
+    if hasattr(obj, "GenerateMesh"):
+        if h is None:
+            raise ParameterError("mesh = a geometry: give h, the element size to mesh it with")
+        ngmesh = obj.GenerateMesh(maxh=float(h))
+    elif isinstance(obj, ngs.Mesh):
+        ngmesh = obj.ngmesh
+    elif type(obj).__name__ == "Mesh" and hasattr(obj, "Save"):
+        ngmesh = obj
+    else:
+        raise ParameterError(f"mesh = {type(obj).__name__} object: give a mesh file path (.msh, .vol), a netgen/OCC "
+                             "geometry or an NGSolve/netgen mesh")
+    folder = cache_folder()
+    folder.mkdir(parents=True, exist_ok=True)
+    tmp = folder / f".store.{os.getpid()}.vol"
+    ngmesh.Save(str(tmp))
+    final = folder / f"{digest(tmp)[:24]}.vol"
+    os.replace(tmp, final)
+    return final
+
+
+def _from_gmsh(path: Path):
+    """A netgen mesh of a gmsh file (linear simplices; the names of the physical groups as region names)."""
+    import meshio
+    import netgen.meshing as nm
+
+    data = meshio.read(str(path), file_format="gmsh")
+    names = {(int(v[1]), int(v[0])): k for k, v in data.field_data.items()}  # (dim, tag) -> name
+    pts = np.asarray(data.points, dtype=float)
+    dim = 3 if any(b.type.startswith("tetra") for b in data.cells) else 2
+    if dim == 2 and pts.shape[1] > 2 and np.abs(pts[:, 2]).max(initial=0.0) > 0:
+        raise ParameterError(f"mesh = {str(path)!r}: a 2D mesh must lie in the plane z = 0")
+    mesh = nm.Mesh(dim=dim)
+    ids = [mesh.Add(nm.MeshPoint(nm.Pnt(*(list(p[:3]) + [0.0] * (3 - len(p[:3])))))) for p in pts]
+    tags = data.cell_data.get("gmsh:physical") or data.cell_data.get("gmsh:geometrical")
+    volume_type, facet_type = ("tetra", "triangle") if dim == 3 else ("triangle", "line")
+    found_volume = False
+    regions = {}  # (dim, tag) -> netgen index
+    for block, tag in zip(data.cells, tags or [None] * len(data.cells)):
+        if block.type not in (volume_type, facet_type):
+            if block.type in ("vertex",) or (dim == 3 and block.type == "line"):
+                continue  # points and 3D edges carry no role
+            raise ParameterError(f"mesh = {str(path)!r}: elements of type {block.type!r} are not supported; give a "
+                                 "mesh of linear triangles (2D) or tetrahedra (3D)")
+        cdim = dim if block.type == volume_type else dim - 1
+        tag = np.zeros(len(block.data), dtype=int) if tag is None else np.asarray(tag, dtype=int)
+        for t in np.unique(tag):
+            key = (cdim, int(t))
+            if key not in regions:
+                regions[key] = len([r for r in regions if r[0] == cdim]) + 1
+                idx = regions[key]
+                name = names.get(key, f"bc{t}" if cdim < dim else f"domain{t}")
+                if cdim == dim:
+                    mesh.SetMaterial(idx, name)
+                elif dim == 3:
+                    mesh.Add(nm.FaceDescriptor(bc=idx, domin=1, domout=0, surfnr=idx))
+                    mesh.SetBCName(idx - 1, name)
+                else:
+                    mesh.SetBCName(idx - 1, name)
+        for nodes, t in zip(block.data, tag):
+            idx = regions[(cdim, int(t))]
+            verts = [ids[int(n)] for n in nodes]
+            if cdim == dim and dim == 3:
+                mesh.Add(nm.Element3D(idx, verts))
+            elif cdim == dim:
+                mesh.Add(nm.Element2D(idx, verts))
+            elif dim == 3:
+                mesh.Add(nm.Element2D(idx, verts))
+            else:
+                mesh.Add(nm.Element1D(verts, index=idx))
+        found_volume |= cdim == dim
+    if not found_volume:
+        raise ParameterError(f"mesh = {str(path)!r} has no {'tetrahedra' if dim == 3 else 'triangles'}")
+    return mesh
+
+
+def write_gmsh(mesh, path) -> Path:
+    """Write an NGSolve mesh (linear simplices) as a gmsh 2.2 file with its boundary names as physical groups.
+
+    The inverse of :func:`read` (vertex and element order kept), e.g. to hand a built-in body to gmsh tools.
+    """
+    import meshio
+    import ngsolve as ngs
+
+    m = mesh if isinstance(mesh, ngs.Mesh) else ngs.Mesh(mesh)
+    ngm = m.ngmesh
+    dim = m.dim
+    pts = np.array(ngm.Coordinates())
+    pts = np.hstack([pts, np.zeros((len(pts), 3 - pts.shape[1]))])
+    vol = (ngm.Elements3D() if dim == 3 else ngm.Elements2D()).NumPy()
+    bnd = (ngm.Elements2D() if dim == 3 else ngm.Elements1D()).NumPy()
+    nv = dim + 1
+    vol_nodes = np.asarray(vol["nodes"][:, :nv], dtype=np.int64) - 1
+    bnd_nodes = np.asarray(bnd["nodes"][:, :dim], dtype=np.int64) - 1
+    vol_index = np.asarray(vol["index"], dtype=np.int64)
+    bnd_index = np.asarray(bnd["index"], dtype=np.int64)  # 3D: the face descriptor
+    if dim == 3:
+        bc_names = {int(i): ngm.FaceDescriptor(int(i)).bcname for i in np.unique(bnd_index)}
+    else:
+        bc_names = {int(i): ngm.GetBCName(int(i) - 1) for i in np.unique(bnd_index)}
+    mats = {int(i): ngm.GetMaterial(int(i)) for i in np.unique(vol_index)}
+    field_data = {}
+    for i, name in bc_names.items():
+        field_data.setdefault(name, np.array([100 + i, dim - 1]))
+    for i, name in mats.items():
+        field_data.setdefault(name, np.array([i, dim]))
+    tag_bnd = np.array([field_data[bc_names[int(i)]][0] for i in bnd_index], dtype=int)
+    tag_vol = np.array([field_data[mats[int(i)]][0] for i in vol_index], dtype=int)
+    # boundary elements first, then the volume (the reader keeps each block's element order)
+    cells = [("line" if dim == 2 else "triangle", bnd_nodes), ("triangle" if dim == 2 else "tetra", vol_nodes)]
+    out = meshio.Mesh(pts, cells, cell_data={"gmsh:physical": [tag_bnd, tag_vol],
+                                             "gmsh:geometrical": [tag_bnd, tag_vol]}, field_data=field_data)
+    path = Path(path)
+    meshio.write(str(path), out, file_format="gmsh22", binary=False)
+    return path

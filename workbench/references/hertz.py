@@ -1,0 +1,94 @@
+"""Hertz's contact of a cylinder and of a sphere on a rigid flat, elastic and viscoelastic (Lee-Radok).
+
+Frictionless contact of an elastic body of radius R with a rigid plane, pressed by a total force P
+(per unit thickness for the cylinder); E* = E / (1 - nu^2) (plane strain for the cylinder):
+
+* cylinder: a = sqrt(4 P R / (pi E*)), p(x) = (2 P / (pi a^2)) sqrt(a^2 - x^2);
+* sphere: a = (3 P R / (4 E*))^(1/3), p(r) = (3 P / (2 pi a^2)) sqrt(1 - r^2 / a^2).
+
+For a linear viscoelastic body whose contact area does not shrink (Lee and Radok), 1/E* is replaced
+by the creep compliance: a(t)^2 = (4 R / pi) int_0^t J*(t - s) dP(s) for the cylinder and
+a(t)^3 = (3 R / 4) int_0^t J*(t - s) dP(s) for the sphere, and the pressure at each time is Hertz's
+for that a. For a Kelvin-Voigt body whose viscous tensor is tau times its elastic one,
+J*(t) = (1 - exp(-t / tau)) / E*.
+
+These are the references of the ``hertz`` scenes (half-space theory: a << R); :func:`profile`
+reads a run's contact pressure against them.
+
+Examples
+--------
+>>> a, p = cylinder(P=10.0, R=1.0, E=1000.0, nu=0.3)
+>>> round(a, 4), round(float(p(0.0)), 2), float(p(2 * a))
+(0.1076, 59.14, 0.0)
+>>> round(lee_radok(t=1.0, rate=10.0, R=1.0, E=1000.0, nu=0.3, tau=0.05, body="cylinder") / a, 4)
+0.9747
+"""
+from __future__ import annotations
+
+import math
+
+import numpy as np
+
+
+def reduced_modulus(E: float, nu: float) -> float:
+    """E* = E / (1 - nu^2) of a body on a rigid flat."""
+    return E / (1.0 - nu * nu)
+
+
+def cylinder(P: float, R: float, E: float, nu: float):
+    """(a, p) of a cylinder (plane strain) pressed by P per unit thickness: the half-width and p(x)."""
+    Es = reduced_modulus(E, nu)
+    a = math.sqrt(4.0 * P * R / (math.pi * Es))
+    return a, lambda x: 2.0 * P / (math.pi * a * a) * np.sqrt(np.maximum(a * a - np.asarray(x) ** 2, 0.0))
+
+
+def sphere(P: float, R: float, E: float, nu: float):
+    """(a, p) of a sphere pressed by P: the contact radius and p(r)."""
+    Es = reduced_modulus(E, nu)
+    a = (3.0 * P * R / (4.0 * Es)) ** (1.0 / 3.0)
+    return a, lambda r: 3.0 * P / (2.0 * math.pi * a * a) * np.sqrt(np.maximum(1.0 - (np.asarray(r) / a) ** 2, 0.0))
+
+
+def lee_radok(t: float, rate: float, R: float, E: float, nu: float, tau: float, body: str = "cylinder") -> float:
+    """a(t) under the ramp load P = rate t of a Kelvin-Voigt body with A = tau G (J* = (1 - e^(-t/tau)) / E*)."""
+    creep = rate * (t - tau * (-math.expm1(-t / tau))) / reduced_modulus(E, nu)  # int_0^t J*(t - s) P'(s) ds
+    if body == "cylinder":
+        return math.sqrt(4.0 * R * creep / math.pi)
+    return (0.75 * R * creep) ** (1.0 / 3.0)
+
+
+def profile(ds, time=None):
+    """The contact pressure of a ``hertz`` run at ``time`` (default: its last) against Hertz's for the load then.
+
+    Returns a dict: ``a`` (Hertz), ``a_last`` / ``a_next`` (the farthest contact vertex with a positive
+    pressure, the nearest without), ``l2`` (the relative L2 error of the pressure over the contact side
+    within 2 a, by the nodal weights), ``force`` (the contact force over the load's share that the modelled
+    part carries), ``x``, ``p``, ``p_hertz`` (by distance from the apex).
+    """
+    from ..expressions import parse
+
+    a_ = ds.attrs
+    i = -1 if time is None else int(np.argmin(np.abs(ds.time.values - time)))
+    t = float(ds.time.values[i])
+    P = float(parse(a_["load"], name="load", allowed=("t",))(t=t))
+    R, E, nu = float(a_["radius"]), float(a_["E"]), float(a_["nu"])
+    three = "node_z" in ds.coords
+    if three:
+        r = np.hypot(ds.node_x.values, ds.node_y.values)
+        a, p_of = sphere(P, R, E, nu)
+        share = P / 4.0  # the quarter x, y >= 0
+    else:
+        r = np.abs(ds.node_x.values)
+        a, p_of = cylinder(P, R, E, nu)
+        share = P / 2.0  # the half x >= 0
+    p = ds.contact_pressure.values[i]
+    w = ds.node_weight.values
+    order = np.argsort(r)
+    r, p, w = r[order], p[order], w[order]
+    ph = p_of(r)
+    near = r <= 2.0 * a
+    touching = p > 0
+    return {"t": t, "load": P, "a": a, "a_last": float(r[touching].max()) if touching.any() else 0.0,
+            "a_next": float(r[~touching & (r > 0)].min()) if (~touching).any() else float("nan"),
+            "l2": float(np.sqrt(np.sum(w[near] * (p - ph)[near] ** 2) / np.sum(w[near] * ph[near] ** 2))),
+            "force": float(np.sum(w * p) / share), "x": r, "p": p, "p_hertz": ph}
