@@ -130,6 +130,37 @@ class Discretisation:
         """The dof of the normal component at each contact node."""
         return self.node_dofs[:, self.geometry.normal_axis]
 
+    @cached_property
+    def node_weights(self) -> np.ndarray:
+        """w_i = int_Gamma3 phi_i da at the contact vertices (phi_i the P1 hat function): a vertex's share of the
+        contact side, by which a nodal contact force becomes a pressure (lumped quadrature)."""
+        if self.dim == 1:
+            return np.ones(len(self.node_dofs))
+        p1 = ngs.H1(self.mesh, order=1)
+        lf = ngs.LinearForm(p1)
+        lf += p1.TestFunction() * ngs.ds(self.contact_name)
+        lf.Assemble()
+        return lf.vec.FV().NumPy()[_boundary_vertices(self.mesh, self.contact_name)].copy()
+
+    @cached_property
+    def _node_facets(self):
+        """The facet-to-vertex averaging matrix (by facet measure) of the contact side."""
+        import scipy.sparse as sp
+
+        index = {int(v): i for i, v in enumerate(_boundary_vertices(self.mesh, self.contact_name))}
+        rows, cols, vals = [], [], []
+        for j, el in enumerate(self.mesh.Boundaries(self.contact_name).Elements()):
+            for v in el.vertices:
+                rows.append(index[v.nr])
+                cols.append(j)
+                vals.append(self.facet_measure[j])
+        A = sp.csr_matrix((vals, (rows, cols)), shape=(len(index), len(self.facet_measure)))
+        return sp.diags(1.0 / np.asarray(A.sum(axis=1)).ravel()) @ A
+
+    def node_average(self, facet_values: np.ndarray) -> np.ndarray:
+        """Facet values (in facet order) averaged at the contact vertices by the measures of the adjacent facets."""
+        return self._node_facets @ facet_values
+
     def probe_values(self) -> np.ndarray:
         """u at the probe points, shape (probe, component)."""
         vals = self.u(self.probe_points)
@@ -406,9 +437,4 @@ def _memory_parts(d: Discretisation) -> None:
             d.memory = [(stiffness(d.fes, C, d.dim), C, tau) for C, tau in m.memory.terms]
         else:
             d.memory = [(stiffness(d.fes, m.memory.tensor, d.dim), m.memory.tensor, m.memory.shape)]
-    p1 = ngs.H1(d.mesh, order=1)
-    lf = ngs.LinearForm(p1)
-    lf += p1.TestFunction() * ngs.ds(d.contact_name)
-    lf.Assemble()
-    vertices = _boundary_vertices(d.mesh, d.contact_name)
-    d.contact_weights = lf.vec.FV().NumPy()[vertices].copy()
+    d.contact_weights = d.node_weights

@@ -73,6 +73,8 @@ VARIABLES = {
     "facet": ("1", "contact facet index"),
     "stress_component": ("1", "stress tensor component"),
     "probe_x": ("m", "probe x"), "probe_y": ("m", "probe y"), "probe_z": ("m", "probe z"),
+    "node_weight": ("m", "the contact vertex's share of the contact side, int phi_i da (m^2 in 3D; per unit "
+                    "thickness in 2D): nodal force / node_weight = pressure"),
     "node_x": ("m", "contact vertex x"), "node_y": ("m", "contact vertex y"), "node_z": ("m", "contact vertex z"),
     "facet_x": ("m", "contact facet midpoint x"), "facet_y": ("m", "contact facet midpoint y"),
     "vertex_x": ("m", "vertex x"), "vertex_y": ("m", "vertex y"), "vertex_z": ("m", "vertex z"),
@@ -173,7 +175,7 @@ class Recorder:
             i = len(self.times) - 1
             for key, val in (scheme.diagnostics() | (control or {})).items():
                 self.extra.setdefault(key, []).append(val)
-            for key, arr in scheme.node_values().items():
+            for key, arr in scheme.node_values(t).items():
                 self.node_extra.setdefault(key, []).append(np.asarray(arr))
             assert all(len(v) == i + 1 for v in self.extra.values()), "diagnostics must be given at every record"
             if self.every_step and len(self.times) > self.max_records:
@@ -230,6 +232,9 @@ class Recorder:
         for c in range(dim):
             coords[f"probe_{COMPONENTS[c]}"] = _var("probe", probes[:, c], f"probe_{COMPONENTS[c]}")
             coords[f"node_{COMPONENTS[c]}"] = _var("node", d.node_xyz[:, c], f"node_{COMPONENTS[c]}")
+        if dim > 1:
+            coords["node_weight"] = _var("node", d.node_weights, "node_weight")
+            coords["node_weight"].attrs["units"] = "m" if dim == 2 else "m^2"
         shape = (0, len(probes), dim)
         data = {
             "u_probe": _var(("time", "probe", "component"), np.stack(self.u_probe) if n else np.empty(shape), "u_probe"),

@@ -331,8 +331,8 @@ def make(name: str, overrides: dict | None = None, *, base: str | None = None, d
     if "scheme" not in overrides and preset.model == "B":
         values["scheme"] = "vi"
     _check_consistency(name, body, values, preset.model)
-    return Scene(name, preset.geometry, values, description or preset.description, frozenset(overrides), base,
-                 preset.model, source)
+    user = frozenset(overrides) | ({"mesh_digest"} if "mesh" in known else set())  # (a variant keeps the digest)
+    return Scene(name, preset.geometry, values, description or preset.description, user, base, preset.model, source)
 
 
 def _mesh_values(raw: dict, overrides: dict) -> None:
@@ -454,7 +454,7 @@ def _check_memory(body, v):
                              "of the kernel tensor (negative for relaxation)")
 
 
-_TOML_KEYS = {"scene", "name", "description", "parameters", "traction"}
+_TOML_KEYS = {"scene", "name", "description", "parameters", "traction", "geometry", "boundaries", "model"}
 
 
 def from_toml(path, overrides: dict | None = None) -> Scene:
@@ -485,6 +485,12 @@ def from_toml(path, overrides: dict | None = None) -> Scene:
         if key not in _TOML_KEYS:
             raise ParameterError(f"{path.name}: unknown top-level key {key!r}; allowed: {', '.join(sorted(_TOML_KEYS))}"
                                  + closest_name(key, _TOML_KEYS))
+    if "geometry" in data:
+        return _toml_mesh_scene(path, data, overrides)
+    for key in ("boundaries", "model"):
+        if key in data:
+            raise ParameterError(f"{path.name}: {key} applies to a body from a mesh file: give geometry = \"body.msh\" "
+                                 "too")
     base = data.get("scene")
     if base is None:
         raise ParameterError(f"{path.name}: give the built-in scene to start from, e.g. scene = \"slab\"")
@@ -514,6 +520,39 @@ def from_toml(path, overrides: dict | None = None) -> Scene:
     name = data.get("name", path.stem)
     try:
         return make(name, values, base=base, description=data.get("description", ""), source=str(path.resolve()))
+    except ParameterError as err:
+        raise ParameterError(f"{path.name}: {err}") from None
+
+
+def _toml_mesh_scene(path: Path, data: dict, overrides) -> Scene:
+    """A scene file with ``geometry = "body.msh"`` (relative to the file), ``[boundaries]`` and ``model``."""
+    from . import meshes
+
+    geometry, roles = data["geometry"], data.get("boundaries", {})
+    if not isinstance(geometry, str):
+        raise ParameterError(f"{path.name}: geometry = {geometry!r} must be the path of a mesh file")
+    if not isinstance(roles, dict):
+        raise ParameterError(f"{path.name}: boundaries must be a table ([boundaries] with name = \"role\" lines)")
+    if "traction" in data:
+        raise ParameterError(f"{path.name}: a body from a mesh takes its load as traction = \"(...)\" in [parameters] "
+                             "(on every boundary with the role traction), not a [traction] table")
+    params = data.get("parameters", {})
+    if not isinstance(params, dict):
+        raise ParameterError(f"{path.name}: parameters must be a table ([parameters] with name = value lines)")
+    mesh = Path(geometry).expanduser()
+    mesh = mesh if mesh.is_absolute() else path.resolve().parent / mesh
+    try:
+        dim = meshes.read(mesh).dim
+        model = data.get("model", "A")
+        if model not in ("A", "B"):
+            raise ParameterError(f"model = {model!r}; allowed: 'A' | 'B'")
+        base = data.get("scene") or MESH_SCENES.get((dim, model))
+        if base not in MESH_SCENES.values():
+            raise ParameterError(f"scene = {base!r}: a body from a mesh file starts from one of "
+                                 f"{', '.join(MESH_SCENES.values())}")
+        values = dict(params) | {"mesh": str(mesh), "boundaries": roles} | dict(overrides or {})
+        return make(data.get("name", path.stem), values, base=base, description=data.get("description", ""),
+                    source=str(path.resolve()))
     except ParameterError as err:
         raise ParameterError(f"{path.name}: {err}") from None
 

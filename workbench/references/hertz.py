@@ -61,7 +61,8 @@ def profile(ds, time=None):
     """The contact pressure of a ``hertz`` run at ``time`` (default: its last) against Hertz's for the load then.
 
     Returns a dict: ``a`` (Hertz), ``a_last`` / ``a_next`` (the farthest contact vertex with a positive
-    pressure, the nearest without), ``l2`` (the relative L2 error of the pressure over the contact side
+    pressure, the nearest without), ``a_fit`` (the half-width of the Hertz profile fitted to the pressure:
+    p^2 linear in r^2), ``l2`` (the relative L2 error of the pressure over the contact side
     within 2 a, by the nodal weights), ``force`` (the contact force over the load's share that the modelled
     part carries), ``x``, ``p``, ``p_hertz`` (by distance from the apex).
     """
@@ -88,7 +89,15 @@ def profile(ds, time=None):
     ph = p_of(r)
     near = r <= 2.0 * a
     touching = p > 0
-    return {"t": t, "load": P, "a": a, "a_last": float(r[touching].max()) if touching.any() else 0.0,
+    # Hertz's p^2 is linear in r^2, vanishing at a: fitted on the vertices in contact (the outermost one, whose
+    # lumped pressure averages over the edge, left out), a = sqrt(-intercept / slope)
+    # (the apex left out too: it is held, and its pressure is a reaction)
+    fit = touching & (r > 0) & (r < r[touching].max()) if touching.sum() > 4 else touching & (r > 0)
+    a_fit = float("nan")
+    if fit.sum() >= 2:
+        slope, intercept = np.polyfit(r[fit] ** 2, p[fit] ** 2, 1)
+        a_fit = float(np.sqrt(-intercept / slope)) if slope < 0 < intercept else float("nan")
+    return {"t": t, "load": P, "a": a, "a_fit": a_fit, "a_last": float(r[touching].max()) if touching.any() else 0.0,
             "a_next": float(r[~touching & (r > 0)].min()) if (~touching).any() else float("nan"),
             "l2": float(np.sqrt(np.sum(w[near] * (p - ph)[near] ** 2) / np.sum(w[near] * ph[near] ** 2))),
             "force": float(np.sum(w * p) / share), "x": r, "p": p, "p_hertz": ph}

@@ -228,7 +228,8 @@ class Scheme:
     def diagnostics(self) -> dict:
         return {}
 
-    def node_values(self) -> dict:
+    def node_values(self, t: float | None = None) -> dict:
+        """Per contact vertex, what the run records at time t (e.g. the contact pressure)."""
         return {}
 
     def stress_parts(self) -> list:
@@ -364,6 +365,42 @@ class KelvinVoigtScheme(Scheme):
             b = beta[rs.element]
             groups += [(m.bonding.gamma_nu * b * r * r - m.bonding.eps_a, rs.weights), (b, rs.weights)]
         return groups
+
+    def node_values(self, t: float | None = None) -> dict:
+        """The contact pressure at the contact vertices: the normal force the laws exert on each, int p_nu phi_i da
+        (by the quadrature of the boundary functional), over its share w_i of the side (the lumped pressure, as
+        Model B reports it); where a vertex is held (``pins_contact``) the whole force there, K_A v + K_G u - f
+        at its normal dof, over w_i."""
+        from ..physics.ops import NP
+
+        d, m = self.d, self.d.model
+        if d.dim == 1 or not m.contact or d.side is None:
+            return {}
+        u = d.u.vec.FV().NumPy()
+        g, side = d.geometry, d.side
+        beta = self._beta()
+        p = m.contact.normal(NP, side.u_nu(u), None if beta is None else beta[side.element], side.gap0)
+        pressure = np.zeros(len(d.node_dofs))
+        if p is not None:  # (u_nu = sign u_normal: the nodal force in u_nu's direction is sign * that dof's entry)
+            force = side.integrate(p)
+            pressure = g.normal_sign * force[d.normal_dofs] / d.node_weights
+        if g.pins_contact and t is not None:
+            free = np.array(d.fes.FreeDofs(), dtype=bool)
+            pinned = np.nonzero(~free[d.normal_dofs])[0]
+            if pinned.size:
+                f = d.u.vec.CreateVector()
+                d.load_vector(t, f)
+                internal = d.u.vec.CreateVector()
+                internal[:] = 0.0
+                tmp, out = d.u.vec.CreateVector(), d.u.vec.CreateVector()
+                for tensor, vector in self.stress_parts():
+                    tmp.FV().NumPy()[:] = vector
+                    out.data = (d.viscous.mat if tensor is m.viscous else d.elastic.mat) * tmp
+                    internal.data += out
+                dofs = d.normal_dofs[pinned]
+                force = internal.FV().NumPy()[dofs] - f.FV().NumPy()[dofs]
+                pressure[pinned] = -g.normal_sign * force / d.node_weights[pinned]
+        return {"contact_pressure": pressure}
 
     def event(self, start: dict):
         before = self.switching(start["u"], start["beta"])

@@ -401,7 +401,7 @@ class MemoryVI(Scheme):
     def diagnostics(self) -> dict:
         return dict(self.diag)
 
-    def node_values(self) -> dict:
+    def node_values(self, t: float | None = None) -> dict:
         """Per contact node: the contact pressure lam / w and the state (clamped vertices: NaN / -1)."""
         d = self.d
         n = len(d.node_dofs)

@@ -1,0 +1,146 @@
+"""Bodies from mesh files and netgen geometry, with their boundaries given roles (issue 12).
+
+References: the built-in scene of the same body and mesh (a mesh written to a gmsh file and read back has
+the same vertices and elements, so the runs must agree bitwise); the named errors of docs/conventions.md.
+"""
+import subprocess
+import sys
+
+import numpy as np
+import pytest
+
+import workbench
+from workbench import meshes
+from workbench.errors import ParameterError
+
+SLAB_ROLES = {"bottom": "contact", "left": "clamped", "top": "traction", "right": "free"}
+
+
+def _same(a, b):
+    for name in ("u_probe", "u_contact", "beta", "u_dofs"):
+        if name in a:
+            np.testing.assert_array_equal(a[name].values, b[name].values, err_msg=name)
+
+
+@pytest.fixture(scope="module")
+def slab_msh(tmp_path_factory):
+    """The built-in slab's mesh (h = 0.05) as a gmsh file."""
+    sc = workbench.scene("slab", h=0.05)
+    return meshes.write_gmsh(sc.body.mesh(), tmp_path_factory.mktemp("mesh") / "slab.msh")
+
+
+@pytest.mark.parametrize("order,scheme", [(1, "explicit"), (2, "implicit")])
+def test_a_gmsh_file_gives_the_built_in_result(slab_msh, order, scheme):
+    """tp5's physics on the slab read from a gmsh file equals the built-in tp5 bit for bit (P1 explicit, P2
+    implicit; bonding, compliance and the load on the top)."""
+    kw = dict(T=0.05, k=0.001 if scheme == "explicit" else 0.01, order=order, scheme=scheme, snapshots=(),
+              progress=False)
+    built_in = workbench.run("tp5", h=0.05, **kw)
+    tp5 = workbench.scene("tp5")
+    physics = {n: tp5[n] for n in ("E", "nu", "a1", "a2", "c_nu", "gamma_nu", "L", "eps_a", "beta0",
+                                   "bonding_truncation", "adhesion")}
+    sc = workbench.scene(mesh=str(slab_msh), boundaries=SLAB_ROLES, traction=tp5["traction_top"].source,
+                         probes=tp5["probes"], **physics)
+    from_file = workbench.run(sc, **kw)
+    assert sc.name == "mesh2d" and not sc.body.curved
+    _same(built_in, from_file)
+
+
+def test_a_mesh_object_and_a_netgen_file_give_the_built_in_result(tmp_path):
+    """Model B: memory_slab's mesh passed as an NGSolve mesh (stored as a .vol in the cache) and named in a TOML
+    file as a netgen .vol geometry give memory_slab's result."""
+    ms = workbench.scene("memory_slab", h=0.25)
+    kw = dict(T=0.1, k=0.05, progress=False)
+    built_in = workbench.run(ms, **kw)
+    roles = SLAB_ROLES
+    physics = {n: ms[n] for n in ("E", "nu", "gap", "F", "c", "prony")}
+    sc = workbench.scene(mesh=ms.body.mesh(), model="B", boundaries=roles, traction=ms["traction_top"].source,
+                         probes=ms["probes"], **physics)
+    assert sc.name == "memory_mesh2d" and sc["mesh"].endswith(".vol")
+    _same(built_in, workbench.run(sc, **kw))
+    toml = tmp_path / "body.toml"
+    toml.write_text(f'geometry = "{sc["mesh"]}"\nmodel = "B"\n[boundaries]\n'
+                    + "".join(f'{k} = "{v}"\n' for k, v in roles.items())
+                    + "[parameters]\n" + f'traction = "{ms["traction_top"].source}"\nprony = [[-1000.0, 0.3, 0.5]]\n'
+                    + f"gap = {ms['gap']}\nF = {ms['F']}\nc = {ms['c']}\n"
+                    + f"probes = {[list(p) for p in ms['probes']]}\n")
+    _same(built_in, workbench.run(str(toml), **kw))
+
+
+def test_a_netgen_geometry_is_meshed_at_h(tmp_path):
+    """An OCC geometry is meshed with maxh = h; the scene keeps the file (by content) and its digest, so the same
+    geometry and h give the same file, and a changed file is refused by name."""
+    from netgen.occ import X, Y, OCCGeometry, Rectangle
+
+    face = Rectangle(1.0, 0.2).Face()
+    face.edges.Min(Y).name, face.edges.Min(X).name, face.edges.Max(Y).name = "bottom", "left", "top"
+    roles = {"bottom": "contact", "left": "clamped", "top": "traction", "default": "free"}
+    a = workbench.scene(mesh=OCCGeometry(face, dim=2), h=0.05, boundaries=roles)
+    b = workbench.scene(mesh=OCCGeometry(face, dim=2), h=0.05, boundaries=roles)
+    c = workbench.scene(mesh=OCCGeometry(face, dim=2), h=0.1, boundaries=roles)
+    assert a["mesh"] == b["mesh"] != c["mesh"] and a.body.n_cells() > c.body.n_cells()
+    assert len(a["mesh_digest"]) == 64
+    ds = workbench.run(a, T=0.02, k=0.01, progress=False)
+    assert ds.attrs["status"] == "complete" and ds.attrs["mesh_digest"] == a["mesh_digest"]
+    copy = tmp_path / "copy.vol"
+    copy.write_bytes(open(a["mesh"], "rb").read())
+    s = workbench.scene(mesh=str(copy), boundaries=roles)
+    copy.write_bytes(open(c["mesh"], "rb").read())
+    with pytest.raises(ParameterError, match="the file has changed"):
+        s.with_(T=0.5)
+
+
+def _run_cli(*args, cwd=None):
+    return subprocess.run([sys.executable, "-m", "workbench.cli", *args], capture_output=True, text=True, cwd=cwd)
+
+
+@pytest.mark.parametrize("case,message", [
+    ("missing", "no such file"),
+    ("unknown", "'botom' is not a boundary of the mesh.*did you mean 'bottom'"),
+    ("unassigned", "the mesh's boundary 'right' has no role"),
+    ("role", "bottom = 'contacts' is not a role; allowed: clamped \\| traction \\| contact \\| free"),
+    ("dimension", "is a 2D mesh; this scene needs a 3D one"),
+    ("no contact", "no boundary has the role contact"),
+    ("below", "the contact boundary reaches y = -0.05 < 0"),
+    ("h", "a mesh body's element size is its mesh's"),
+])
+def test_bad_mesh_input_is_refused_by_name(slab_msh, tmp_path, case, message):
+    """Each mistake gets a ParameterError naming it, before any work; on the command line one 'error:' line (exit
+    code 2), no traceback."""
+    roles = dict(SLAB_ROLES)
+    kw = {}
+    mesh, scene = str(slab_msh), None
+    if case == "missing":
+        mesh = str(tmp_path / "nothing.msh")
+    elif case == "unknown":
+        roles["botom"] = roles.pop("bottom")
+    elif case == "unassigned":
+        roles.pop("right")
+    elif case == "role":
+        roles["bottom"] = "contacts"
+    elif case == "dimension":
+        scene = "mesh3d"
+    elif case == "no contact":
+        roles["bottom"] = "free"
+    elif case == "below":
+        m = workbench.scene("slab", h=0.05).body.mesh()
+        import ngsolve as ngs
+
+        ngm = m.ngmesh
+        for p in ngm.Points():
+            x, y, z = p.p
+            p[1] = y - 0.05
+        mesh = str(meshes.write_gmsh(ngs.Mesh(ngm), tmp_path / "low.msh"))
+    elif case == "h":
+        kw["h"] = 0.01
+    with pytest.raises(ParameterError, match=message):
+        workbench.scene(scene, mesh=mesh, boundaries=roles, **kw) if scene else \
+            workbench.scene(mesh=mesh, boundaries=roles, **kw)
+    toml = tmp_path / "bad.toml"
+    toml.write_text(f'geometry = "{mesh}"\n' + (f'scene = "{scene}"\n' if scene else "")
+                    + "[boundaries]\n" + "".join(f'{k} = "{v}"\n' for k, v in roles.items())
+                    + ("[parameters]\nh = 0.01\n" if kw else ""))
+    p = _run_cli("run", str(toml), "-o", str(tmp_path / "out.nc"))
+    assert p.returncode == 2, p.stderr
+    assert p.stderr.startswith("error: ") and "Traceback" not in p.stderr and len(p.stderr.splitlines()) == 1
+    assert not (tmp_path / "out.nc").exists()
