@@ -69,9 +69,9 @@ def lee_radok(out):
     a = np.array([hertz.lee_radok(t, 10.0, 1.0, 1000.0, 0.3, 0.2) for t in times])
     last = np.array([hertz.profile(ds, t)["a_last"] for t in times])
     nxt = np.array([hertz.profile(ds, t)["a_next"] for t in times])
-    ok = a / 0.00125 >= 20
+    ok = a / 0.00125 >= 35
     print(f"Lee-Radok (ndof {ds.attrs['ndof']}, {wall:.2f} s): a_last / a - 1 within "
-          f"[{(last[ok] / a[ok] - 1).min():+.4f}, {(last[ok] / a[ok] - 1).max():+.4f}] once a >= 20 h_contact "
+          f"[{(last[ok] / a[ok] - 1).min():+.4f}, {(last[ok] / a[ok] - 1).max():+.4f}] once a >= 35 h_contact "
           f"(t >= {times[ok][0]:.2f} s)")
     return times, a, last, nxt
 

@@ -3,6 +3,7 @@
 References: the built-in scene of the same body and mesh (a mesh written to a gmsh file and read back has
 the same vertices and elements, so the runs must agree bitwise); the named errors of docs/conventions.md.
 """
+import math
 import subprocess
 import sys
 
@@ -144,3 +145,34 @@ def test_bad_mesh_input_is_refused_by_name(slab_msh, tmp_path, case, message):
     assert p.returncode == 2, p.stderr
     assert p.stderr.startswith("error: ") and "Traceback" not in p.stderr and len(p.stderr.splitlines()) == 1
     assert not (tmp_path / "out.nc").exists()
+
+
+@pytest.mark.parametrize("scene,measure", [("memory_hertz", math.pi / 4), ("memory_hertz3d", math.pi / 6),
+                                           ("tp5", 0.1)])
+def test_archives_describe_their_mesh_by_ugrid(tmp_path, scene, measure):
+    """An archive read back knows its body by the UGRID conventions alone: the variable with cf_role mesh_topology
+    names the vertex coordinates and the cell connectivity, from which the body's measure is that of the quarter
+    disc (pi/4), the quarter hemisphere (pi/6; faceted: 2.2 % less at h = 0.25) or the slab (0.1 x 1), and exactly
+    NGSolve's measure of the scene's mesh."""
+    import xarray as xr
+
+    kw = dict(h_contact=0.04) if scene == "memory_hertz3d" else dict(h=0.05) if scene == "tp5" else {}
+    path = workbench.write(workbench.run(scene, T=0.25 if scene != "tp5" else 0.02, progress=False, **kw),
+                           tmp_path / "a.nc")
+    ds = xr.open_dataset(path)
+    assert "UGRID-1.0" in ds.attrs["Conventions"]
+    (topo,) = [v for v in ds.variables.values() if v.attrs.get("cf_role") == "mesh_topology"]
+    dim = int(topo.attrs["topology_dimension"])
+    xyz = np.stack([ds[n].values for n in topo.attrs["node_coordinates"].split()], axis=1)
+    role = {2: "face_node_connectivity", 3: "volume_node_connectivity"}[dim]
+    cells = ds[topo.attrs[role]]
+    assert cells.attrs["cf_role"] == role
+    nodes = cells.values - int(cells.attrs.get("start_index", 0))
+    edges = xyz[nodes[:, 1:]] - xyz[nodes[:, :1]]
+    total = np.abs(np.linalg.det(edges)).sum() / math.factorial(dim)
+    assert total == pytest.approx(measure, rel=0.03 if dim == 3 else 2e-3)  # the body's own (faceted) measure:
+    import ngsolve as ngs
+
+    sc = workbench.scene(scene, **kw)
+    assert total == pytest.approx(ngs.Integrate(ngs.CF(1.0), sc.body.mesh()), rel=1e-10)
+    assert ds.u_nodes.attrs["mesh"] == "mesh" and ds.u_nodes.attrs["location"] == "node"

@@ -65,15 +65,22 @@ def test_normal_compliance_approaches_the_signorini_pressure():
 
 def test_viscoelastic_hertz_follows_lee_radok():
     """Kelvin-Voigt with A = tau G (tau = 0.2 s) under the ramp P = 10 t: the contact half-width a(t) follows Lee
-    and Radok's a(t)^2 = (4 R / pi) int J*(t - s) dP(s) within 3 % once the contact holds 20 elements (BDF2,
-    c_nu = 1e7)."""
+    and Radok's a(t)^2 = (4 R / pi) int J*(t - s) dP(s): the last vertex in contact lies within two elements of a at
+    every recorded time once a spans 10 elements (a vertex carries a force as soon as one quadrature point beside
+    it touches: up to an element beyond the edge), and within 3 % once it spans 35 (BDF2, c_nu = 1e7; measured:
+    0.4 to 2.4 % beyond a)."""
     ds = workbench.run("hertz", h_contact=0.00125, c_nu=1e7, tau=0.2, k=0.02, scheme="bdf2", snapshots=(),
                        progress=False)
-    for t in (0.25, 0.5, 0.75, 1.0):
-        r = hertz.profile(ds, t)
+    checked = 0
+    for t in ds.time.values[1:]:
         a = hertz.lee_radok(t, rate=10.0, R=1.0, E=1000.0, nu=0.3, tau=0.2, body="cylinder")
-        assert a / 0.00125 > 20
-        assert abs(r["a_last"] / a - 1) < 0.03 and r["a_next"] > a * 0.97, (t, r["a_last"], r["a_next"], a)
+        r = hertz.profile(ds, t)
+        if a >= 10 * 0.00125:  # the contact's last vertex lies within two elements (as there: a_next - a_last) of a
+            assert abs(r["a_last"] - a) <= 2 * (r["a_next"] - r["a_last"]) and r["a_next"] > a, (t, r["a_last"], a)
+        if a >= 35 * 0.00125:  # ... which is within 3 % of a beyond 35 elements
+            assert abs(r["a_last"] / a - 1) < 0.03, (t, r["a_last"], a)
+            checked += 1
+    assert checked >= 30
     # the lag behind the elastic contact is what is measured: at t = 0.25 the elastic a is 26 % larger
     assert hertz.cylinder(2.5, 1.0, 1000.0, 0.3)[0] > 1.2 * hertz.lee_radok(0.25, 10.0, 1.0, 1000.0, 0.3, 0.2)
 

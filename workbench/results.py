@@ -258,6 +258,11 @@ class Recorder:
             for c in range(dim):
                 coords[f"vertex_{COMPONENTS[c]}"] = _var("vertex", vxyz[:, c], f"vertex_{COMPONENTS[c]}")
             data["cell_vertices"] = _var(("cell", "corner"), mesh_cells(d.mesh, dim), "cell_vertices")
+            data["mesh"] = ugrid_topology(dim, data["cell_vertices"])
+            if dim == 3:
+                data["mesh_volume_shape"] = xr.Variable(("cell",), np.zeros(len(data["cell_vertices"]), np.int8), attrs={
+                    "cf_role": "volume_shape_type", "long_name": "the shape of each cell", "flag_values": np.int8(0),
+                    "flag_meanings": "tetrahedron"})
             data["u_dofs"] = _var(("snapshot", "dof"), np.stack([s[1] for s in self.snaps]), "u_dofs")
             vd = d.vertex_dofs
             data["u_nodes"] = _var(("snapshot", "vertex", "component"),
@@ -269,7 +274,30 @@ class Recorder:
                 data["edge_vertices"] = _var(("edge", "end"), d.edges[0], "edge_vertices")
                 data["u_edges"] = _var(("snapshot", "edge", "component"), np.stack([s[4] for s in self.snaps]),
                                        "u_edges")
+        if "mesh" in data:  # the fields on the mesh say where they live (UGRID)
+            for name, location in (("u_nodes", "node"), ("stress", UGRID_CELLS[dim][2]),
+                                   ("von_mises", UGRID_CELLS[dim][2])):
+                data[name].attrs.update(mesh="mesh", location=location)
         return xr.Dataset(data, coords=coords, attrs=attrs)
+
+
+#: UGRID names by dimension: (cell connectivity role, the shape of the cells, the location of cell data).
+UGRID_CELLS = {1: ("edge_node_connectivity", "", "edge"), 2: ("face_node_connectivity", "", "face"),
+               3: ("volume_node_connectivity", "tetrahedron", "volume")}
+
+
+def ugrid_topology(dim: int, connectivity: xr.Variable) -> xr.Variable:
+    """The UGRID mesh topology variable of a body (and the roles on its connectivity, in place): a reader of UGRID
+    (e.g. xugrid, ParaView's UGRID reader) finds the vertices in ``vertex_x/y/z`` and the cells in
+    ``cell_vertices`` (0-based)."""
+    role, shape, _ = UGRID_CELLS[dim]
+    connectivity.attrs.update(cf_role=role, start_index=0)
+    attrs = {"cf_role": "mesh_topology", "long_name": "the body's mesh (UGRID 1.0 topology)",
+             "topology_dimension": dim, "node_coordinates": " ".join(f"vertex_{c}" for c in COMPONENTS[:dim]),
+             role: "cell_vertices", f"{UGRID_CELLS[dim][2]}_dimension": "cell"}
+    if shape:
+        attrs["volume_shape_type"] = "mesh_volume_shape"
+    return xr.Variable((), np.int32(0), attrs=attrs)
 
 
 def mesh_cells(mesh, dim):
@@ -313,7 +341,7 @@ def provenance(scene, extra: dict, call: str = "", terms=None) -> dict:
     discretisation, cost, versions and a ``history`` line with the full command or call."""
     from .parameters import PARAMETERS
 
-    attrs = {"Conventions": "CF-1.10", "title": f"workbench run of scene {scene.name}: {scene.description}",
+    attrs = {"Conventions": "CF-1.10 UGRID-1.0", "title": f"workbench run of scene {scene.name}: {scene.description}",
              "scene": scene.name, "base_scene": scene.base, "geometry": scene.geometry,
              "description": scene.description, "model": scene.model,
              "terms": ",".join(scene.terms if terms is None else terms) or "none"}
