@@ -12,6 +12,11 @@ A coarse run's fields are carried onto the fine run's mesh:
   facet midpoint is located in the coarse mesh and takes that cell's value
   (exact on nested meshes).
 
+On a curved side, a fine vertex may lie just outside the coarser faceted mesh (by
+O(h^2)): it takes its nearest coarse cell, whose field is extrapolated to it, and a
+fine contact facet the nearest coarse one (:meth:`MeshInfo.locate`). Bodies that
+are not boxes (mesh files, the Hertz bodies) are keyed by what determines their mesh.
+
 Norms (docs/models.md; Corollary 6.7 of the 2003 paper): |u|_V = ||eps(u)||_L2(Omega), |sigma|_Q = ||sigma||_L2
 (Frobenius), |beta|_L2(Gamma_3), evaluated on the fine mesh.
 """
@@ -47,12 +52,31 @@ class MeshInfo:
         self._strain_matrix = None
 
     def locate(self, points: np.ndarray, vb=ngs.VOL):
-        """Cell numbers and barycentric coordinates of ``points`` (n x dim) in this mesh."""
+        """Cell numbers of ``points`` (n x dim) in this mesh (boundary elements with ``vb = BND``).
+
+        A point outside the mesh, as a fine mesh's vertex on a curved side is outside a coarser faceted one
+        (by O(h^2)), takes the nearest cell: among the cells of the 8 nearest centroids, the one its barycentric
+        coordinates leave least (the field is then extrapolated linearly from it). A point farther out than a
+        cell's size is an error.
+        """
         pts = [points[:, i] for i in range(self.dim)]
         mp = self.mesh(*pts, VOL_or_BND=vb) if vb == ngs.BND else self.mesh(*pts)
         nr = np.asarray(mp["nr"], dtype=np.int64)
-        if np.any(nr < 0):
-            raise ValueError("transfer: some points of the fine mesh are outside the coarse mesh")
+        out = np.nonzero(nr < 0)[0]
+        if out.size and vb == ngs.VOL:
+            from scipy.spatial import cKDTree
+
+            k = min(8, len(self.cells))
+            _, near = cKDTree(self.centroids).query(points[out], k=k)
+            near = np.asarray(near).reshape(len(out), k)
+            for j, i in enumerate(out):
+                lam = self.barycentric(np.repeat(points[i:i + 1], k, axis=0), near[j])
+                best = int(np.argmax(lam.min(axis=1)))
+                if lam[best].min() < -0.5:
+                    raise ValueError(f"transfer: the fine mesh's point {points[i].tolist()} is outside the coarse mesh")
+                nr[i] = near[j][best]
+        elif out.size:
+            raise ValueError("transfer: some boundary points of the fine mesh are off the coarse mesh's boundary")
         return nr
 
     def barycentric(self, points: np.ndarray, cells: np.ndarray) -> np.ndarray:
@@ -83,7 +107,22 @@ class MeshInfo:
 def mesh_info(scene) -> MeshInfo:
     """The (cached) MeshInfo of a scene's mesh: keyed by everything that determines it (geometry, cells, order)."""
     body = scene.body
+    if not body.extent_names or body.curved:  # (no box: the body itself says what its mesh is)
+        return _body_info(body, scene["order"])
     return _mesh_info(body.kind, body.extent, body.cells(), scene["order"])
+
+
+_MESH_INFOS: dict = {}
+
+
+def _body_info(body, order) -> MeshInfo:
+    """The MeshInfo of a body that is not a box (a mesh file, a Hertz body), keyed by what determines its mesh."""
+    key = (body.key(), order)
+    if key not in _MESH_INFOS:
+        if len(_MESH_INFOS) >= 16:
+            _MESH_INFOS.pop(next(iter(_MESH_INFOS)))
+        _MESH_INFOS[key] = MeshInfo(body, order)
+    return _MESH_INFOS[key]
 
 
 @lru_cache(maxsize=16)
@@ -120,14 +159,19 @@ class Transfer:
         if coarse.dim == 1:
             self.facet_map = np.zeros(len(fine.facet_xyz), dtype=np.int64)
         else:
-            bnd_el = coarse.locate(fine.facet_xyz, vb=ngs.BND)
-            position = np.full(coarse.bspace.ndof, -1)
-            position[coarse.beta_dofs] = np.arange(len(coarse.beta_dofs))
-            elements, inverse = np.unique(bnd_el, return_inverse=True)
-            dofs = np.array([coarse.bspace.GetDofNrs(ngs.ElementId(ngs.BND, int(e)))[0] for e in elements])
-            self.facet_map = position[dofs][inverse]
-            if np.any(self.facet_map < 0):
-                raise ValueError("transfer: a contact facet of the fine mesh is not on the coarse contact side")
+            if coarse.geometry.curved:  # (a fine facet midpoint is off the coarse facets): the nearest coarse facet
+                from scipy.spatial import cKDTree
+
+                self.facet_map = cKDTree(coarse.facet_xyz).query(fine.facet_xyz)[1]
+            else:
+                bnd_el = coarse.locate(fine.facet_xyz, vb=ngs.BND)
+                position = np.full(coarse.bspace.ndof, -1)
+                position[coarse.beta_dofs] = np.arange(len(coarse.beta_dofs))
+                elements, inverse = np.unique(bnd_el, return_inverse=True)
+                dofs = np.array([coarse.bspace.GetDofNrs(ngs.ElementId(ngs.BND, int(e)))[0] for e in elements])
+                self.facet_map = position[dofs][inverse]
+                if np.any(self.facet_map < 0):
+                    raise ValueError("transfer: a contact facet of the fine mesh is not on the coarse contact side")
 
     def displacement(self, u_dofs: np.ndarray, u_nodes: np.ndarray) -> np.ndarray:
         """The coarse displacement as a fine dof vector."""

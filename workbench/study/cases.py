@@ -38,9 +38,9 @@ BASE_AXES = ("h", "k", "order", "scheme")
 #: Axes that change only the discretisation, not the modelled problem: cases that differ only in these
 #: share one reference run; any other swept parameter (c_nu, gamma_nu, ...) gets a reference of its own.
 DISCRETISATION = frozenset({"h", "k", "order", "scheme", "solver", "nx", "ny", "nz", "allow_unstable", "rtol", "atol",
-                            "k_min", "k_max", "memory_rule", "kernel_approximation", "kernel_tol"})
+                            "k_min", "k_max", "memory_rule", "kernel_approximation", "kernel_tol", "h_contact"})
 #: Axes along which an observed order can be fitted (finest value = smallest).
-REFINEMENT = ("h", "k", "rtol")
+REFINEMENT = ("h", "k", "rtol", "h_contact")
 _PREFIX = {"h": "h", "k": "k", "order": "p", "scheme": ""}
 
 

@@ -160,7 +160,8 @@ def make(spec, scene, cases, axes):
     if isinstance(spec, str):
         if spec == "finest":
             # (error-controlled cases: the smallest tolerance; their k is only the first step)
-            best = min(cases, key=lambda c: (c.h, c.get("rtol", 0.0), c.k, -c.order, c.scheme != "implicit"))
+            best = min(cases, key=lambda c: (c.h, c.get("h_contact", 0.0), c.get("rtol", 0.0), c.k, -c.order,
+                                             c.scheme != "implicit"))
             values = {k: v for k, v in best.values().items() if k in DISCRETISATION}
             return RunReference(cases, values, listed=False, describe="finest")
         if spec in ("ode", "exact"):
