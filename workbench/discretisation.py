@@ -96,6 +96,7 @@ class Discretisation:
         self.vertex_xyz = coords
         self.vertex_dofs = _vertex_dofs(fes, dim, mesh.nv)
         nodes = _boundary_vertices(mesh, self.contact_name)
+        self.vertex_numbers = nodes  # the contact vertices (mesh vertex numbers), in node order
         self.node_dofs, self.node_xyz = self.vertex_dofs[nodes], coords[nodes]
         free = np.array(fes.FreeDofs(), dtype=bool)
         self.dirichlet_dofs = np.nonzero(~free)[0]

@@ -267,7 +267,7 @@ class Scene:
             if n == "scheme":
                 allowed = " | ".join(repr(s) for s in schemes_of(self.model))
             elif n == "order" and self.model == "B":
-                allowed = "1"
+                allowed = "1 | 2" if self.dim == 2 else "1"
             rows.append((n, to_plain(self.values[n]), params[n].unit, allowed, params[n].meaning))
         return rows
 
@@ -363,9 +363,10 @@ def _check_consistency(name, body, v, model="A"):
                              f"allowed: {' | '.join(repr(s) for s in allowed)}")
     if model == "B":
         _check_memory(body, v)
-        if v["order"] != 1:
-            raise ParameterError(f"order = {v['order']}: Model B constrains the contact vertices (K_h), so order must "
-                                 "be 1")
+        if v["order"] > (2 if body.dim == 2 else 1):
+            raise ParameterError(f"order = {v['order']}: Model B constrains the contact nodes (K_h): order 1, or 2 on "
+                                 f"a 2D body (vertices and facet midpoints); allowed here: order "
+                                 f"{'1 | 2' if body.dim == 2 else '1'}")
     if v["k"] > v["T"]:
         raise ParameterError(f"k = {v['k']:g} is larger than T = {v['T']:g}; allowed: 0 < k <= T")
     if v.get("rtol", 0) > 0:

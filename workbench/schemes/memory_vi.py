@@ -20,8 +20,10 @@ Prony kernels cost O(number of terms) per step; a general kernel O(n), unless it
 approximated by a sum of exponentials (``kernel_approximation = "exponentials"``,
 :meth:`workbench.physics.memory.GeneralKernel.exponential_sum`), which then runs as a
 Prony series. j_h(v) = sum_i w_i psi(v_nu,i) is the layer functional with lumped
-boundary quadrature (w_i = int phi_i da). u(0) solves the inequality at t = 0 (no
-memory yet).
+boundary quadrature (w_i = int phi_i da), at the contact vertices (P1) or, on P2 in
+2D, at the vertices and facet midpoints with Simpson's weights (s = B u there, the
+condensed system B K^-1 B^T). On a curved contact side the law acts on s - g0, the
+initial gap g0 taken off. u(0) solves the inequality at t = 0 (no memory yet).
 
 Solver, with no parameter to tune: the elastic matrix K_A (with the trapezoid rule:
 K_A plus the current step's memory part) is factored once and condensed onto the
@@ -66,13 +68,17 @@ class MemoryVI(Scheme):
         self.w = d.contact_weights[self.active_nodes]
         # a curved contact side: the layer's law acts on u_nu - g0 (the initial gap at the node; None: flat)
         self.g0 = d.geometry.gap0(d.node_xyz[self.active_nodes])
+        self.vertex_weights = d.contact_weights  # each contact vertex's share of the side (P2: Simpson's)
+        self.B = None  # P2: s = B u at the contact points (the vertices, then the facet midpoints)
+        if d.scene["order"] == 2:
+            self._quadratic_points(free)
         self.pinned = np.nonzero(~free[normal])[0] if d.geometry.pins_contact else np.zeros(0, dtype=np.int64)
         self._balance = None  # f - memory of the last equilibrium (only for the reaction of pinned contact nodes)
         self._operators = OrderedDict()
         self.scales = d.memory_scale or [1.0] * len(d.memory)  # (before _use: the step operator needs them)
         self._use(0.0)
-        self.states = np.full(self.C.size, unilateral.SEPARATED)
-        self.lam = np.zeros(self.C.size)
+        self.states = np.full(self.w.size, unilateral.SEPARATED)
+        self.lam = np.zeros(self.w.size)
         self.z = np.zeros(d.ndof)
         self.rhs = d.u.vec.CreateVector()
         self.rhs_np = self.rhs.FV().NumPy()
@@ -91,6 +97,39 @@ class MemoryVI(Scheme):
         self.times = [0.0]
         self.diag = {}
         self._pending = None
+
+    def _quadratic_points(self, free) -> None:
+        """P2 (2D): the constraint and the layer's law at the contact vertices and the facet midpoints (the nodes of
+        P2), lumped by Simpson's rule (a vertex: 1/6 of each adjacent facet, a midpoint: 2/3 of its facet).
+        s = B u, B the normal trace at those points (NGSolve's P2 edge functions are hierarchical, so a midpoint's
+        u_nu involves its edge dof as well as the two vertices)."""
+        import scipy.sparse as sp
+
+        from ..boundary import ContactSide
+
+        d = self.d
+        mid = ContactSide(d.fes, d.contact_name, d.geometry, rule=0)  # one point per facet: its midpoint
+        facet_len = mid.weights
+        n_v = len(d.node_dofs)
+        index = {int(v): i for i, v in enumerate(d.vertex_numbers)}
+        w_v = np.zeros(n_v)
+        for j, el in enumerate(d.mesh.Boundaries(d.contact_name).Elements()):
+            for v in el.vertices:
+                w_v[index[v.nr]] += facet_len[mid.element == j].sum() / 6.0
+        rows_v = sp.csr_matrix((np.full(self.active_nodes.size, self.sign), (np.arange(self.active_nodes.size),
+                                                                           self.C)), shape=(self.active_nodes.size,
+                                                                                            d.ndof))
+        self.B = sp.vstack([rows_v, mid.T_nu]).tocsr()
+        self.w = np.concatenate([w_v[self.active_nodes], 2.0 * facet_len / 3.0])
+        self.vertex_weights = w_v
+        self.n_vertex_points = self.active_nodes.size
+        if self.g0 is not None:
+            self.g0 = np.concatenate([self.g0, mid.gap0])
+        self.C = np.unique(self.B.indices)  # the dofs the contact points see (for the recovery only)
+
+    def _s(self, u):
+        """u_nu at the contact points."""
+        return self.sign * u[self.C] if self.B is None else self.B @ u
 
     def local_error(self, rtol, atol, order=None):
         """The memory rule's error over the last step, through the step's operator: max |K^-1 dM| / (atol + rtol U).
@@ -179,10 +218,16 @@ class MemoryVI(Scheme):
                 for wi, si, (K, _, _) in zip(weights, self.scales, d.memory):
                     vec.data += (wi * si) * K.mat.AsVector()
             solver = solvers.factor(M, d.fes.FreeDofs(), d.u.vec, d.scene["solver"])
-            S_inv = CondensedSystem(solver, d.ndof, self.C).S0_inv  # (sign^2 = 1: the same in s)
+            if self.B is None:
+                S_inv = CondensedSystem(solver, d.ndof, self.C).S0_inv  # (sign^2 = 1: the same in s)
+            else:  # S0 = B M^-1 B^T
+                S0 = self.B @ solver.solve_many(self.B.T.toarray())
+                S0 = 0.5 * (S0 + S0.T)
+                S_inv = np.linalg.inv(S0)
+                S_inv = 0.5 * (S_inv + S_inv.T)
             # z = s + rho lam / S_ii-scaled: the prox scaling comes from the body's own stiffness. A large factor
             # predicts the states from the contact force (measured: factor 1 cycles on memory_slab, 10 and 100 settle)
-            self._operators[key] = (M, solver, S_inv, 100.0 / np.diag(S_inv) if self.C.size else np.zeros(0))
+            self._operators[key] = (M, solver, S_inv, 100.0 / np.diag(S_inv) if self.w.size else np.zeros(0))
             while len(self._operators) > self.cache_size:
                 self._operators.popitem(last=False)
         else:
@@ -283,20 +328,24 @@ class MemoryVI(Scheme):
         if d.moves_clamp:
             self.z[d.dirichlet_dofs] = d.dirichlet_value(time)
         solves = 1
-        if self.C.size:
-            s_free = self.sign * self.z[self.C]
+        if self.w.size:
+            s_free = self._s(self.z)
             if self.g0 is not None:  # the layer's law in the distance to the foundation
                 s_free = s_free - self.g0
             s, lam, iterations = self._active_set(s_free, time)
             if self.g0 is not None:
                 s = s + self.g0
-            force = np.zeros(d.ndof)
-            force[self.C] = self.sign * lam  # contact forces on the body, in dof direction: -(outward) ...
+            if self.B is None:
+                force = np.zeros(d.ndof)
+                force[self.C] = self.sign * lam  # contact forces on the body, in dof direction: -(outward) ...
+            else:
+                force = self.B.T @ lam
             out = np.zeros(d.ndof)
             self.solver.solve(force, out)
             solves += 1
             u[:] = self.z - out
-            u[self.C] = self.sign * s  # the constrained values exactly (removes round-off above g)
+            if self.B is None:
+                u[self.C] = self.sign * s  # the constrained values exactly (removes round-off above g)
             self.lam = lam
         else:
             u[:] = self.z
@@ -307,12 +356,12 @@ class MemoryVI(Scheme):
             "n_separated": int(counts[0]), "n_stuck": int(counts[1]), "n_compliant": int(counts[2]),
             "n_rigid": int(counts[3]),
             "complementarity": self.layer.complementarity(self._distance(u), self.lam, self.w, self.rho * self.w)
-            if self.C.size else 0.0,
+            if self.w.size else 0.0,
         }
 
     def _distance(self, u):
         """s - g0: the contact nodes' normal displacement less their initial gap (what the layer's law acts on)."""
-        s = self.sign * u[self.C]
+        s = self._s(u)
         return s - self.g0 if self.g0 is not None else s
 
     # -- state, events ----------------------------------------------------------------------------------------------
@@ -342,7 +391,7 @@ class MemoryVI(Scheme):
     def event(self, start: dict):
         """Where to land on a state change; the crossed share is 0: the estimate (a pair of memory rules) does
         not see the kinks of u."""
-        if not self.C.size:
+        if not self.w.size:
             return None, 0.0
         return first_event(self.switching(start["u"], start["extra"]["lam"]),
                            self.switching(self.d.u.vec.FV().NumPy(), self.lam)), 0.0
@@ -406,15 +455,16 @@ class MemoryVI(Scheme):
         d = self.d
         n = len(d.node_dofs)
         pressure, state = np.full(n, np.nan), np.full(n, -1, dtype=np.int64)
-        pressure[self.active_nodes] = self.lam / self.w
-        state[self.active_nodes] = self.states
+        m = self.active_nodes.size  # (P2: the first m contact points are the vertices)
+        pressure[self.active_nodes] = self.lam[:m] / self.w[:m]
+        state[self.active_nodes] = self.states[:m]
         if self.pinned.size and self._balance is not None:
             # a vertex held where the contact holds it: its contact force is the support's reaction,
             # R = (M u - (f - memory)) at its normal dof, pushing the body out of the foundation
             self.work.data = self.M * d.u.vec
             dofs = d.normal_dofs[self.pinned]
             reaction = -self.sign * (self.work.FV().NumPy()[dofs] - self._balance[dofs])
-            weights = d.contact_weights[self.pinned]
+            weights = self.vertex_weights[self.pinned]
             pressure[self.pinned] = reaction / weights
             state[self.pinned] = unilateral.STUCK if self.layer.g > 0 or self.layer.F > 0 else unilateral.RIGID
         return {"contact_pressure": pressure, "contact_state": state}
