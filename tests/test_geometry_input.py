@@ -176,3 +176,21 @@ def test_archives_describe_their_mesh_by_ugrid(tmp_path, scene, measure):
     sc = workbench.scene(scene, **kw)
     assert total == pytest.approx(ngs.Integrate(ngs.CF(1.0), sc.body.mesh()), rel=1e-10)
     assert ds.u_nodes.attrs["mesh"] == "mesh" and ds.u_nodes.attrs["location"] == "node"
+
+
+def test_a_3d_gmsh_file_gives_the_built_in_block(tmp_path):
+    """The block's mesh (h = 0.25) through a gmsh file: the implicit run with compliance and bonding equals the
+    built-in block's bit for bit."""
+    b = workbench.scene("block", h=0.25, order=1)
+    path = meshes.write_gmsh(b.body.mesh(), tmp_path / "block.msh")
+    kw = dict(T=0.02, k=0.005, scheme="implicit", snapshots=(), progress=False)
+    phys = {n: b[n] for n in ("adhesion", "c_nu", "gamma_nu", "L", "E", "nu", "a1", "a2")}
+    roles = {"left": "clamped", "bottom": "contact", "top": "traction", "right": "free", "front": "free",
+             "back": "free"}
+    sc = workbench.scene(mesh=str(path), boundaries=roles, traction=b["traction_top"].source, probes=b["probes"],
+                         order=1, **phys)
+    assert sc.name == "mesh3d"
+    with pytest.warns(RuntimeWarning, match="lock in bending"):
+        built_in = workbench.run(b, **kw)
+    with pytest.warns(RuntimeWarning, match="lock in bending"):
+        _same(built_in, workbench.run(sc, **kw))
