@@ -132,7 +132,9 @@ def _from_gmsh(path: Path):
     if dim == 2 and pts.shape[1] > 2 and np.abs(pts[:, 2]).max(initial=0.0) > 0:
         raise ParameterError(f"mesh = {str(path)!r}: a 2D mesh must lie in the plane z = 0")
     mesh = nm.Mesh(dim=dim)
-    ids = [mesh.Add(nm.MeshPoint(nm.Pnt(*(list(p[:3]) + [0.0] * (3 - len(p[:3])))))) for p in pts]
+    xyz = np.zeros((len(pts), 3))
+    xyz[:, : min(3, pts.shape[1])] = pts[:, :3]
+    mesh.AddPoints(np.ascontiguousarray(xyz))  # (in file order: point i is netgen's point i + 1)
     tags = data.cell_data.get("gmsh:physical") or data.cell_data.get("gmsh:geometrical")
     volume_type, facet_type = ("tetra", "triangle") if dim == 3 else ("triangle", "line")
     found_volume = False
@@ -158,17 +160,13 @@ def _from_gmsh(path: Path):
                     mesh.SetBCName(idx - 1, name)
                 else:
                     mesh.SetBCName(idx - 1, name)
-        for nodes, t in zip(block.data, tag):
-            idx = regions[(cdim, int(t))]
-            verts = [ids[int(n)] for n in nodes]
-            if cdim == dim and dim == 3:
-                mesh.Add(nm.Element3D(idx, verts))
-            elif cdim == dim:
-                mesh.Add(nm.Element2D(idx, verts))
-            elif dim == 3:
-                mesh.Add(nm.Element2D(idx, verts))
-            else:
-                mesh.Add(nm.Element1D(verts, index=idx))
+        nodes = np.asarray(block.data, dtype=np.int32)
+        if len(np.unique(tag)) == 1:  # (one region: in file order, in one call)
+            mesh.AddElements(cdim, regions[(cdim, int(tag[0]))], np.ascontiguousarray(nodes), base=0)
+        else:  # (elements keep the file's order: runs of equal tags, each in one call)
+            cuts = np.flatnonzero(np.diff(tag)) + 1
+            for a, b in zip(np.r_[0, cuts], np.r_[cuts, len(tag)]):
+                mesh.AddElements(cdim, regions[(cdim, int(tag[a]))], np.ascontiguousarray(nodes[a:b]), base=0)
         found_volume |= cdim == dim
     if not found_volume:
         raise ParameterError(f"mesh = {str(path)!r} has no {'tetrahedra' if dim == 3 else 'triangles'}")
