@@ -791,3 +791,13 @@ def test_run_stays_the_function_after_the_study_imports_the_runner():
     out = subprocess.run([sys.executable, "-c", code], capture_output=True, text=True, timeout=300)
     assert out.returncode == 0, out.stderr
     assert out.stdout.split() == ["function", "complete"]
+
+
+def test_output_piped_into_head_ends_quietly():
+    """`workbench show tp5 | head -1`: the reader leaves early (here: before the first line, `| true`); the command
+    stops without a traceback."""
+    for reader in ("head -1", "true"):
+        p = subprocess.run(f"{sys.executable} -m workbench.cli show tp5 | {reader}", shell=True, capture_output=True,
+                           text=True)
+        assert "Traceback" not in p.stderr and "BrokenPipe" not in p.stderr, (reader, p.stderr)
+        assert p.stdout.startswith("tp5") or reader == "true"

@@ -410,6 +410,14 @@ def main(argv=None) -> int:
         except KeyboardInterrupt:
             print("error: interrupted", file=sys.stderr)
             return 130
+        except BrokenPipeError:  # the reader left (`workbench show tp5 | head`): stop quietly, as Unix tools do
+            import os
+
+            try:
+                os.dup2(os.open(os.devnull, os.O_WRONLY), sys.stdout.fileno())
+            except OSError:
+                pass
+            return 141
         finally:  # main() called in a session (a notebook, a test): later library calls are not this command
             if token is not None:
                 invocation.reset(token)
