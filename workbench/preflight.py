@@ -42,16 +42,13 @@ def available_memory() -> float:
 
 def estimate(geometry, order: int) -> Estimate:
     """Displacement dofs and bytes to assemble and factor the constant matrix (order of magnitude)."""
-    cells = geometry.cells()
     dim = geometry.dim
-    vertices = 1
-    for n in cells:
-        vertices *= n + 1
+    vertices = geometry.vertex_count()
     ndof = dim * vertices * order ** dim  # P_p: about p^d scalar dofs per vertex on simplices
     if dim == 1:
         return Estimate(int(ndof), 200.0 * ndof)
     if dim == 2:
-        width = 2 * order * (min(cells) + 1)  # RCM bandwidth across the shorter side (scalar dofs x components)
+        width = 2 * order * (geometry.band_cells() + 1)  # RCM bandwidth across the shorter side (dofs x components)
         banded = 8.0 * ndof * width
         dissection = 8.0 * 30.0 * ndof * max(1.0, math.log2(ndof))
         factor = min(banded, dissection)
