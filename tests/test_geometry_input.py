@@ -194,3 +194,14 @@ def test_a_3d_gmsh_file_gives_the_built_in_block(tmp_path):
         built_in = workbench.run(b, **kw)
     with pytest.warns(RuntimeWarning, match="lock in bending"):
         _same(built_in, workbench.run(sc, **kw))
+
+
+def test_the_memory_preflight_counts_a_mesh_bodys_own_vertices(slab_msh):
+    """The estimate before a run (which refuses a run that cannot fit) takes the mesh's vertices, not its element
+    count as if it were a box's cells: P1 dofs exactly, for a file and for a Hertz body."""
+    from workbench import discretisation, preflight
+
+    for sc in (workbench.scene(mesh=str(slab_msh), boundaries=SLAB_ROLES),
+               workbench.scene("memory_hertz3d", h_contact=0.04)):
+        est = preflight.estimate(sc.body, 1)
+        assert est.ndof == discretisation.build(sc.with_(order=1)).ndof
