@@ -68,16 +68,21 @@ class ContactOperator:
 
 
 class CondensedSystem:
-    """S0^{-1} = ((M^{-1})_CC)^{-1} for one matrix M, built with the factored M."""
+    """S0^{-1} = ((M^{-1})_CC)^{-1} for one matrix M, built with the factored M; with a trace matrix B (rows: the
+    contact points) instead of the dofs C, S0 = B M^{-1} B^T."""
 
-    def __init__(self, solver, ndof: int, C: np.ndarray, chunk: int = 256):
-        m = C.size
+    def __init__(self, solver, ndof: int, C: np.ndarray, chunk: int = 256, B=None):
+        m = C.size if B is None else B.shape[0]
         S0 = np.empty((m, m))
         for start in range(0, m, chunk):
-            cols = C[start:start + chunk]
-            R = np.zeros((ndof, cols.size))
-            R[cols, np.arange(cols.size)] = 1.0
-            S0[:, start:start + cols.size] = solver.solve_many(R)[C]
+            if B is None:
+                cols = C[start:start + chunk]
+                R = np.zeros((ndof, cols.size))
+                R[cols, np.arange(cols.size)] = 1.0
+                S0[:, start:start + cols.size] = solver.solve_many(R)[C]
+            else:
+                R = B[start:start + chunk].T.toarray()
+                S0[:, start:start + R.shape[1]] = B @ solver.solve_many(R)
         S0 = 0.5 * (S0 + S0.T)
         self.S0_inv = la.cho_solve(la.cho_factor(S0), np.eye(m)) if m else S0
         self.S0_inv = 0.5 * (self.S0_inv + self.S0_inv.T)

@@ -141,14 +141,23 @@ class Discretisation:
         lf = ngs.LinearForm(p1)
         lf += p1.TestFunction() * ngs.ds(self.contact_name)
         lf.Assemble()
-        return lf.vec.FV().NumPy()[_boundary_vertices(self.mesh, self.contact_name)].copy()
+        return lf.vec.FV().NumPy()[self.vertex_numbers].copy()
+
+    @cached_property
+    def pinned_nodes(self) -> np.ndarray:
+        """The contact vertices held in the normal direction where the contact holds them anyway (the Hertz apex,
+        ``pins_contact``): their contact force is the support's reaction. Empty for every other body."""
+        if not self.geometry.pins_contact:
+            return np.zeros(0, dtype=np.int64)
+        free = np.array(self.fes.FreeDofs(), dtype=bool)
+        return np.nonzero(~free[self.normal_dofs])[0]
 
     @cached_property
     def _node_facets(self):
         """The facet-to-vertex averaging matrix (by facet measure) of the contact side."""
         import scipy.sparse as sp
 
-        index = {int(v): i for i, v in enumerate(_boundary_vertices(self.mesh, self.contact_name))}
+        index = {int(v): i for i, v in enumerate(self.vertex_numbers)}
         rows, cols, vals = [], [], []
         for j, el in enumerate(self.mesh.Boundaries(self.contact_name).Elements()):
             for v in el.vertices:

@@ -256,7 +256,8 @@ class MeshBody(Geometry):
 
         from . import meshes
 
-        names = sorted(meshes.boundary_names(ngs.Mesh(self._ngmesh)))
+        mesh = ngs.Mesh(self._ngmesh)
+        names = sorted(meshes.boundary_names(mesh))
         for name, role in self.roles.items():
             if name not in names:
                 raise ParameterError(f"boundaries: {name!r} is not a boundary of the mesh {self.path!r}; its "
@@ -282,7 +283,6 @@ class MeshBody(Geometry):
         xyz = np.array(self._ngmesh.Coordinates())[:, : self.dim]
         self._bbox = tuple((float(lo), float(hi)) for lo, hi in zip(xyz.min(axis=0), xyz.max(axis=0)))
         self.extent = tuple(hi - lo for lo, hi in self._bbox)
-        mesh = ngs.Mesh(self._ngmesh)
         p1 = ngs.H1(mesh, order=1)
         on = np.nonzero(np.array(p1.GetDofs(mesh.Boundaries(self.boundaries["contact"])), dtype=bool))[0]
         lowest = float(xyz[on, self.normal_axis].min())

@@ -384,22 +384,19 @@ class KelvinVoigtScheme(Scheme):
         if p is not None:  # (u_nu = sign u_normal: the nodal force in u_nu's direction is sign * that dof's entry)
             force = side.integrate(p)
             pressure = g.normal_sign * force[d.normal_dofs] / d.node_weights
-        if g.pins_contact and t is not None:
-            free = np.array(d.fes.FreeDofs(), dtype=bool)
-            pinned = np.nonzero(~free[d.normal_dofs])[0]
-            if pinned.size:
-                f = d.u.vec.CreateVector()
-                d.load_vector(t, f)
-                internal = d.u.vec.CreateVector()
-                internal[:] = 0.0
-                tmp, out = d.u.vec.CreateVector(), d.u.vec.CreateVector()
-                for tensor, vector in self.stress_parts():
-                    tmp.FV().NumPy()[:] = vector
-                    out.data = (d.viscous.mat if tensor is m.viscous else d.elastic.mat) * tmp
-                    internal.data += out
-                dofs = d.normal_dofs[pinned]
-                force = internal.FV().NumPy()[dofs] - f.FV().NumPy()[dofs]
-                pressure[pinned] = -g.normal_sign * force / d.node_weights[pinned]
+        pinned = d.pinned_nodes
+        if pinned.size and t is not None:
+            f, internal = d.u.vec.CreateVector(), d.u.vec.CreateVector()
+            tmp, out = d.u.vec.CreateVector(), d.u.vec.CreateVector()
+            d.load_vector(t, f)
+            internal[:] = 0.0
+            for tensor, vector in self.stress_parts():
+                tmp.FV().NumPy()[:] = vector
+                out.data = (d.viscous.mat if tensor is m.viscous else d.elastic.mat) * tmp
+                internal.data += out
+            dofs = d.normal_dofs[pinned]
+            force = internal.FV().NumPy()[dofs] - f.FV().NumPy()[dofs]
+            pressure[pinned] = -g.normal_sign * force / d.node_weights[pinned]
         return {"contact_pressure": pressure}
 
     def event(self, start: dict):

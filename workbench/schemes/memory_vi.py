@@ -71,8 +71,8 @@ class MemoryVI(Scheme):
         self.vertex_weights = d.contact_weights  # each contact vertex's share of the side (P2: Simpson's)
         self.B = None  # P2: s = B u at the contact points (the vertices, then the facet midpoints)
         if d.scene["order"] == 2:
-            self._quadratic_points(free)
-        self.pinned = np.nonzero(~free[normal])[0] if d.geometry.pins_contact else np.zeros(0, dtype=np.int64)
+            self._quadratic_points()
+        self.pinned = d.pinned_nodes
         self._balance = None  # f - memory of the last equilibrium (only for the reaction of pinned contact nodes)
         self._operators = OrderedDict()
         self.scales = d.memory_scale or [1.0] * len(d.memory)  # (before _use: the step operator needs them)
@@ -98,7 +98,7 @@ class MemoryVI(Scheme):
         self.diag = {}
         self._pending = None
 
-    def _quadratic_points(self, free) -> None:
+    def _quadratic_points(self) -> None:
         """P2 (2D): the constraint and the layer's law at the contact vertices and the facet midpoints (the nodes of
         P2), lumped by Simpson's rule (a vertex: 1/6 of each adjacent facet, a midpoint: 2/3 of its facet).
         s = B u, B the normal trace at those points (NGSolve's P2 edge functions are hierarchical, so a midpoint's
@@ -109,13 +109,14 @@ class MemoryVI(Scheme):
 
         d = self.d
         mid = ContactSide(d.fes, d.contact_name, d.geometry, rule=0)  # one point per facet: its midpoint
-        facet_len = mid.weights
-        n_v = len(d.node_dofs)
+        facet_len = mid.weights  # (one point per facet, in point order)
+        length = np.zeros(len(facet_len))
+        length[mid.element] = facet_len  # in facet order
         index = {int(v): i for i, v in enumerate(d.vertex_numbers)}
-        w_v = np.zeros(n_v)
+        w_v = np.zeros(len(d.node_dofs))
         for j, el in enumerate(d.mesh.Boundaries(d.contact_name).Elements()):
             for v in el.vertices:
-                w_v[index[v.nr]] += facet_len[mid.element == j].sum() / 6.0
+                w_v[index[v.nr]] += length[j] / 6.0
         rows_v = sp.csr_matrix((np.full(self.active_nodes.size, self.sign), (np.arange(self.active_nodes.size),
                                                                            self.C)), shape=(self.active_nodes.size,
                                                                                             d.ndof))
@@ -218,13 +219,7 @@ class MemoryVI(Scheme):
                 for wi, si, (K, _, _) in zip(weights, self.scales, d.memory):
                     vec.data += (wi * si) * K.mat.AsVector()
             solver = solvers.factor(M, d.fes.FreeDofs(), d.u.vec, d.scene["solver"])
-            if self.B is None:
-                S_inv = CondensedSystem(solver, d.ndof, self.C).S0_inv  # (sign^2 = 1: the same in s)
-            else:  # S0 = B M^-1 B^T
-                S0 = self.B @ solver.solve_many(self.B.T.toarray())
-                S0 = 0.5 * (S0 + S0.T)
-                S_inv = np.linalg.inv(S0)
-                S_inv = 0.5 * (S_inv + S_inv.T)
+            S_inv = CondensedSystem(solver, d.ndof, self.C, B=self.B).S0_inv  # (P1: sign^2 = 1, the same in s)
             # z = s + rho lam / S_ii-scaled: the prox scaling comes from the body's own stiffness. A large factor
             # predicts the states from the contact force (measured: factor 1 cycles on memory_slab, 10 and 100 settle)
             self._operators[key] = (M, solver, S_inv, 100.0 / np.diag(S_inv) if self.w.size else np.zeros(0))
