@@ -164,20 +164,31 @@ def test_a_study_refines_the_contact_zone():
 
 
 def test_both_model_a_schemes_on_a_curved_body():
-    """The rocker of docs/examples (a curved sole, adhesion, compliance): the paper's explicit scheme below its
-    predicted k_crit agrees with the implicit scheme at a small step, and a k above k_crit is refused before work."""
+    """The rocker of docs/examples (a curved sole, adhesion, compliance): only the part of the sole that touches has
+    a foundation spring, so the explicit scheme's limit for the springs that act (the run's k_crit_min, 2.5 x the
+    bound with the spring on the whole sole, measured) lets it run at twice that bound, in agreement with the
+    implicit scheme at a small step; a step above the limit the state reaches stops the run with the steps so far,
+    and one above the limit at the start is refused before work."""
     from pathlib import Path
 
     from workbench import stability
-    from workbench.errors import StepTooLarge
+    from workbench.errors import StepLimitExceeded, StepTooLarge
 
     toml = Path(__file__).resolve().parents[1] / "docs" / "examples" / "rocker.toml"
     sc = workbench.scene(str(toml), T=0.2, c_nu=1e3)
     assert sc.body.curved
-    k_crit = stability.critical_step(sc).k_crit
+    bound = stability.critical_step(sc).k_crit
     ref = workbench.run(sc, scheme="implicit", k=1e-4, snapshots=(), progress=False)
-    ds = workbench.run(sc, scheme="explicit", k=0.5 * k_crit, snapshots=(), progress=False)
+    ds = workbench.run(sc, scheme="explicit", k=2.0 * bound, snapshots=(), progress=False)
+    assert ds.attrs["k_crit_min"] > 2.0 * bound and ds.attrs["k_crit"] >= ds.attrs["k_crit_min"]
     tip = lambda d: d.u_probe.isel(time=-1).values  # noqa: E731
-    assert np.abs(tip(ds) - tip(ref)).max() < 0.005 * np.abs(tip(ref)).max()  # measured 0.17 %
+    assert np.abs(tip(ds) - tip(ref)).max() < 0.01 * np.abs(tip(ref)).max()  # measured 0.68 %
+    with pytest.raises(StepLimitExceeded) as err:
+        workbench.run(sc, scheme="explicit", k=1.5 * ds.attrs["k_crit_min"], snapshots=(), progress=False)
+    partial = err.value.dataset
+    assert partial.attrs["status"] == "incomplete" and partial.sizes["time"] > 2
+    assert "contact state changed" in str(err.value) and "scheme = 'implicit'" in str(err.value)
     with pytest.raises(StepTooLarge):
-        workbench.run(sc, scheme="explicit", k=1.5 * k_crit, progress=False)
+        workbench.run(sc, scheme="explicit", k=1.5 * ds.attrs["k_crit"], progress=False)
+
+

@@ -134,7 +134,8 @@ def test_divergence_stops_and_keeps(tmp_path):
     assert proc.returncode == 3 and "error:" in proc.stderr
     assert workbench.load(out).attrs["status"] == "incomplete"
     proc = subprocess.run([sys.executable, "-m", "workbench.cli", "run", "slab", "--h", "0.05", "--k", "0.01",
-                           "--set", "c_nu=1e7", "-o", str(tmp_path / "refused.nc")], capture_output=True, text=True)
+                           "--set", "c_nu=1e7", "--set", "traction_top=(0, -1)", "-o", str(tmp_path / "refused.nc")],
+                          capture_output=True, text=True)
     assert proc.returncode == 2 and "k_crit" in proc.stderr and not (tmp_path / "refused.nc").exists()
 
 

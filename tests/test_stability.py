@@ -48,7 +48,8 @@ def test_predicted_k_crit_brackets_onset(name, overrides):
         warnings.simplefilter("ignore", RuntimeWarning)
         with pytest.raises(workbench.Diverged) as err:
             workbench.run(name, k=2.0 * k_crit, allow_unstable=True, progress=False, **overrides)
-    assert err.value.dataset.attrs["stability_override"] == 1
+    # (1: overridden at the start; 2: during the run, when the springs reached a limit below k)
+    assert err.value.dataset.attrs["stability_override"] in (1, 2)
     assert err.value.dataset.attrs["status"] == "incomplete"
 
 
@@ -99,3 +100,55 @@ def test_implicit_rod_against_exact():
             u, b = ref(ds.time.values, x=1.0)
             errs.append(np.abs(ds.u_contact.isel(node=0, component=0).values - u).max())
         assert 0.85 < np.log2(errs[0] / errs[1]) < 1.15 and errs[1] < 3e-4
+
+
+#: The held-out slab of issue 11 (h = 0.05 here): pulled up on its right half, the foundation spring never acts.
+HELD_OUT = dict(E=1000, nu=0.3, a1=30, a2=20, c_nu=100, gamma_nu=20, eps_a=1e-3, L=0.3, c_tau=10,
+                bonding_truncation="symmetric", traction_top="(0, 5*t*ifpos(x - 0.5, 1, 0))", order=2, h=0.05,
+                T=1.0, probes=[(1.0, 0.0)])
+
+
+def test_springs_that_cannot_act_do_not_shorten_the_step():
+    """Pulled away from the foundation, the slab's limit is that of the pull and the glue (3.11e-3 s measured),
+    not the 6.5e-4 s of the bound with the foundation spring too: k = 0.001 runs and agrees with BDF2 at the same
+    k (tip at T, measured 0.29 %), and the observed onset lies within [0.8, 1.25] of the prediction (stable at
+    0.8 x, stopped as diverged at 1.25 x; measured: stable at 3.1e-3, diverged at 3.3e-3)."""
+    bound = stability.critical_step(workbench.scene("slab", **HELD_OUT)).k_crit
+    ds = workbench.run("slab", scheme="explicit", k=1e-3, progress=False, **HELD_OUT)
+    k_crit = ds.attrs["k_crit_min"]
+    assert bound < 1e-3 < k_crit and ds.attrs["stability_override"] == 0
+    ref = workbench.run("slab", scheme="bdf2", k=1e-3, progress=False, **HELD_OUT)
+    tip_y = lambda d: float(d.u_probe.isel(probe=-1, time=-1).sel(component="y"))  # noqa: E731
+    assert abs(tip_y(ds) - tip_y(ref)) < 0.01 * abs(tip_y(ref))
+    below = workbench.run("slab", scheme="explicit", k=0.8 * k_crit, progress=False, **HELD_OUT)
+    assert below.attrs["status"] == "complete" and abs(tip_y(below) - tip_y(ref)) < 0.02 * abs(tip_y(ref))
+    with warnings.catch_warnings():
+        warnings.simplefilter("ignore", RuntimeWarning)
+        with pytest.raises(workbench.Diverged):
+            workbench.run("slab", scheme="explicit", k=1.25 * k_crit, allow_unstable=True, progress=False,
+                          **HELD_OUT)
+
+
+def test_a_run_whose_springs_grow_beyond_its_step_stops_with_what_it_computed():
+    """tp5 (stiff foundation) at k = 0.002: after one step only part of the bottom is pressed in (the start's limit,
+    3.3e-3 s at k = 0.01), so the run starts; when the pressed part has grown so that the limit falls below k the
+    run stops with a message naming the new limit and the ways out, keeping its steps; with allow_unstable it runs
+    on, says so and records it. Below the bound with every spring acting (6.97e-4) it completes."""
+    from workbench.errors import StepLimitExceeded
+
+    with pytest.raises(StepLimitExceeded) as err:
+        workbench.run("tp5", k=0.002, progress=False, **STIFF)
+    msg, ds = str(err.value), err.value.dataset
+    assert "contact state changed" in msg and "scheme = 'implicit'" in msg and "allow_unstable" in msg
+    assert ds.attrs["status"] == "incomplete" and ds.sizes["time"] > 5 and ds.attrs["k_crit_min"] < 0.002
+    assert ds.attrs["failure_type"] == "StepLimitExceeded"
+    with pytest.warns(RuntimeWarning, match="running on"):
+        with warnings.catch_warnings():
+            warnings.filterwarnings("ignore", message=".*debonding.*")
+            try:
+                out = workbench.run("tp5", k=0.002, T=0.2, allow_unstable=True, progress=False, **STIFF)
+            except workbench.Diverged as failed:
+                out = failed.dataset
+    assert out.attrs["stability_override"] == 2
+    ok = workbench.run("tp5", k=6.5e-4, T=0.3, progress=False, **STIFF)
+    assert ok.attrs["status"] == "complete" and ok.attrs["k_crit_min"] >= 6.9e-4

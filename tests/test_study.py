@@ -311,13 +311,14 @@ def test_tolerance_sweep_of_error_controlled_runs(tmp_path):
 
 
 def test_study_whose_first_case_is_refused():
-    """The largest k above the explicit scheme's k_crit (~0.045 on tp5 at h = 0.05) is refused; the study still
-    evaluates (its probe coordinates came from the first case's Dataset, empty when refused: KeyError 'probe_x')."""
-    st = Study("tp5", k=[0.05, 0.001], h=[0.05], scheme="explicit", reference={"k": 0.0005}, T=0.1, workers=0)
+    """The largest k above the explicit scheme's k_crit (0.0455 for the springs a step of 0.1 presses in on tp5 at
+    h = 0.05) is refused; the study still evaluates (its probe coordinates came from the first case's Dataset, empty
+    when refused: KeyError 'probe_x')."""
+    st = Study("tp5", k=[0.1, 0.001], h=[0.05], scheme="explicit", reference={"k": 0.0005}, T=0.1, workers=0)
     ds = st.run(progress=False)
     status = ds.status.squeeze()
-    assert status.sel(k=0.05) == "refused" and status.sel(k=0.001) == "complete"
-    assert np.isnan(ds.error.sel(k=0.05)).all() and np.isfinite(ds.error.sel(k=0.001)).all()
+    assert status.sel(k=0.1) == "refused" and status.sel(k=0.001) == "complete"
+    assert np.isnan(ds.error.sel(k=0.1)).all() and np.isfinite(ds.error.sel(k=0.001)).all()
     np.testing.assert_array_equal(ds.probe_x.values, [p[0] for p in workbench.scene("tp5")["probes"]])
 
 

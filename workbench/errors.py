@@ -7,6 +7,8 @@
 * :class:`Diverged` — a run stopped because its state became non-finite, unbounded
   or oscillating; ``dataset`` holds what was computed, marked incomplete (exit code 3).
 * :class:`NewtonFailed` — an implicit step's nonlinear iteration did not converge.
+* :class:`StepLimitExceeded` — the explicit scheme's state reached springs whose stability
+  limit is below its step; stopped like :class:`Diverged`, with what was computed.
 """
 from __future__ import annotations
 
@@ -33,3 +35,8 @@ class Diverged(RuntimeError):
 
 class NewtonFailed(Diverged):
     """The nonlinear iteration of an implicit step (semismooth Newton, active set) did not converge."""
+
+
+class StepLimitExceeded(Diverged):
+    """The explicit scheme's step exceeds the stability limit of the springs that act in the state the run has
+    reached (they were not acting when it started); ``dataset`` holds the steps before, marked incomplete."""

@@ -1,12 +1,28 @@
-"""Step-size limit of the paper's explicit scheme, predicted before a run.
+"""Step-size limit of the paper's explicit scheme: predicted before a run, kept up to date during it.
 
 The scheme advances u' = K_A^{-1} (F - K_G u - j(u)): forward Euler on the
 elastic and contact terms, so (linearised) it is stable for
 k < k_crit = 2 / lambda_max(K_A^{-1} (K_G + D)), where D is the boundary spring
-matrix at the largest slopes the contact terms can have (each term says its own:
-:meth:`workbench.physics.contact.ContactTerm.max_slope`) on the normal and the
-tangential components. lambda_max comes from Lanczos (SciPy ``eigsh``) on the
+matrix T^T diag(w s) T of the slopes s of the contact terms at the contact
+quadrature points. lambda_max comes from Lanczos (SciPy ``eigsh``) on the
 generalised problem with the factored K_A.
+
+Which slopes: :func:`critical_step` without ``springs`` takes every term at its
+largest slope on the whole contact side (each term says its own:
+:meth:`workbench.physics.contact.ContactTerm.max_slope`), a bound for any state.
+A run takes only the springs that act (:class:`StepLimit`): the slopes of the laws
+at the state, where a point whose law can switch on within the first step counts
+(the state after one trial step is included), and it re-checks every step. A
+spring that cannot act -- the foundation's under a body pulled away, the
+compliance of a curved side off the foundation, the pull of a body pressed in --
+does not shorten the step. When the acting springs grow during the run, lambda_max is
+estimated again (warm started) once the total spring int s da has grown by
+:data:`REESTIMATE_TOTAL` or the local stiffness max_i (K_G + D)_ii / (K_A)_ii by
+:data:`REESTIMATE_LOCAL` since the last estimate: the largest mode of a thin body
+on springs is global (tp5: springs on the whole bottom give k_crit = 6.97e-4 s, on
+the part pressed after one step 3.3e-3 s), so both the amount and the local
+stiffness count. A step above the new limit stops the run
+(:class:`~workbench.errors.StepLimitExceeded`, the steps so far kept).
 
 Examples
 --------
@@ -21,21 +37,39 @@ from dataclasses import dataclass
 
 import ngsolve as ngs
 import numpy as np
+import scipy.sparse as sp
 from scipy.sparse.linalg import ArpackError, ArpackNoConvergence, LinearOperator, eigsh
 
 from . import solvers
 from .errors import ParameterError, StepTooLarge
 from .physics import kelvin_voigt
 
-__all__ = ["Estimate", "critical_step", "check", "StepTooLarge"]
+__all__ = ["Estimate", "StepLimit", "critical_step", "check", "StepTooLarge"]
+
+#: Relative growth of the total spring and of the local stiffness (module docs) above which a run estimates
+#: lambda_max again: lambda_max grows at most in proportion to the springs, so the limit a run works with is within
+#: about these fractions of the limit of the springs it has met.
+REESTIMATE_TOTAL, REESTIMATE_LOCAL = 0.10, 0.01
 
 
 @dataclass(frozen=True)
 class Estimate:
+    """A predicted limit. ``spring_normal`` / ``spring_tangential``: the largest spring (Pa/m) taken;
+    ``acting``: (contact points with a normal spring, with a tangential one, all points), or None for the bound
+    over all states."""
     k_crit: float
     lambda_max: float
     spring_normal: float
     spring_tangential: float
+    acting: tuple | None = None
+
+    def describe(self) -> str:
+        springs = (f"normal {self.spring_normal:.3g}, tangential {self.spring_tangential:.3g} Pa/m")
+        if self.acting is None:
+            return f"boundary springs at their largest slopes everywhere: {springs}"
+        n, t, total = self.acting
+        return (f"springs acting in the state: normal on {n} and tangential on {t} of {total} contact points, "
+                f"largest {springs}")
 
 
 def critical_step(disc_or_scene, solver=None) -> Estimate:
@@ -71,14 +105,21 @@ def critical_step(disc_or_scene, solver=None) -> Estimate:
         inv.solve(full_in, full_out)
         return full_out[free].copy()
 
-    n = free.size
+    lam, _ = _largest_eigenvalue(K, KA, apply_inverse, np.ones(free.size))
+    return Estimate(2.0 / lam, lam, s_nu, s_tau)
+
+
+def _largest_eigenvalue(K, KA, apply_inverse, v0):
+    """(lambda_max, its eigenvector) of K x = lambda KA x; a named error when it cannot be had."""
+    n = K.shape[0]
     try:
         if n <= 3:
             lam = float(np.max(np.real(np.linalg.eigvals(np.linalg.solve(KA.toarray(), K.toarray())))))
+            vec = v0
         else:
             Minv = LinearOperator((n, n), matvec=apply_inverse, dtype=float)
-            lam = float(eigsh(K, k=1, M=KA, Minv=Minv, which="LM", tol=1e-4, return_eigenvectors=False,
-                              v0=np.ones(n))[0])
+            vals, vecs = eigsh(K, k=1, M=KA, Minv=Minv, which="LM", tol=1e-4, v0=v0)
+            lam, vec = float(vals[0]), vecs[:, 0]
     except (ArpackError, ArpackNoConvergence, np.linalg.LinAlgError) as err:
         raise ParameterError(f"the explicit scheme's step limit k_crit cannot be estimated for these values (the "
                              f"eigenvalue iteration failed: {str(err).splitlines()[0][:80]}); check the moduli "
@@ -86,15 +127,125 @@ def critical_step(disc_or_scene, solver=None) -> Estimate:
     if not np.isfinite(lam) or lam <= 0:
         raise ParameterError(f"the explicit scheme's step limit k_crit is not finite for these values (lambda_max = "
                              f"{lam:.3g}); check the moduli (E, a1, a2, c_nu, gamma_nu) or use scheme = 'implicit'")
-    return Estimate(2.0 / lam, lam, s_nu, s_tau)
+    return lam, vec
 
 
-def check(k: float, estimate: Estimate) -> None:
-    """Raise :class:`StepTooLarge` with the estimate and the ways out when k > k_crit."""
+class StepLimit:
+    """The explicit scheme's limit for the springs that act, as the state evolves (module docs).
+
+    Holds the envelope of the slopes met so far per contact quadrature point (normal, and the largest
+    eigenvalue of the tangential slope), which only grows, and the estimate for it.
+
+    Parameters
+    ----------
+    disc : workbench.discretisation.Discretisation
+        Model A's, with its contact side.
+    solver
+        The factored K_A (the explicit scheme's).
+    """
+
+    def __init__(self, disc, solver):
+        d = self.d = disc
+        self.side, self.contact, self.solver = d.side, d.model.contact, solver
+        self.free = np.nonzero(np.array(d.fes.FreeDofs(), dtype=bool))[0]
+        KG = solvers.to_scipy(d.elastic.mat).tocsr()
+        KA = solvers.to_scipy(d.viscous.mat).tocsr()
+        self.KG, self.KA = KG[self.free][:, self.free], KA[self.free][:, self.free]
+        side = self.side
+        self.T_nu = side.T_nu[:, self.free].tocsr()
+        self.T_tau = [T[:, self.free].tocsr() for T in side.T_tau]
+        # (T^2)^T (w s) is the diagonal of T^T diag(w s) T: the indicator costs one sparse product
+        self.sq_nu = self.T_nu.multiply(self.T_nu).T.tocsr()
+        self.sq_tau = sum((T.multiply(T).T.tocsr() for T in self.T_tau), sp.csr_matrix(self.sq_nu.shape))
+        self.diag_KG, self.diag_KA = self.KG.diagonal(), self.KA.diagonal()
+        self.tangential = self.contact.tangential and bool(side.T_tau)
+        self.normal = np.zeros(side.points)
+        self.tangent = np.zeros(side.points)
+        self.estimate, self.indicator, self.updates, self._vector = None, (-np.inf, -np.inf), 0, None
+        self._in, self._out = np.zeros(d.ndof), np.zeros(d.ndof)
+
+    def slopes(self, u_nu, u_tau, beta_q):
+        """(normal, tangential) spring per point at a state: the laws' slopes, the tangential one as the largest
+        eigenvalue of d p_tau / d u_tau."""
+        s_nu = self.contact.normal_slope(u_nu, beta_q, self.side.gap0)
+        if not self.tangential:
+            return s_nu, None
+        S = self.contact.tangential_slope(u_tau, beta_q)
+        if S.shape[-1] == 1:
+            return s_nu, S[..., 0, 0]
+        a, b, c = S[..., 0, 0], 0.5 * (S[..., 0, 1] + S[..., 1, 0]), S[..., 1, 1]
+        return s_nu, 0.5 * (a + c) + np.sqrt(0.25 * (a - c) ** 2 + b * b)
+
+    def grows(self, s_nu, s_tau) -> bool:
+        """Whether a state's springs exceed the envelope somewhere (the per-step test, with :meth:`slopes` about 40 us
+        at 160 points; every step, since an unstable contact mode alternates from step to step and a sparser check
+        can see the same phase only: measured on tp4)."""
+        return bool(np.any(s_nu > self.normal) or (s_tau is not None and np.any(s_tau > self.tangent)))
+
+    def absorb(self, s_nu, s_tau) -> bool:
+        """Take a state's springs into the envelope; True when lambda_max must be estimated again."""
+        np.maximum(self.normal, s_nu, out=self.normal)
+        if s_tau is not None:
+            np.maximum(self.tangent, s_tau, out=self.tangent)
+        total, local = self._indicator()
+        return (total > self.indicator[0] * (1.0 + REESTIMATE_TOTAL)
+                or local > self.indicator[1] * (1.0 + REESTIMATE_LOCAL))
+
+    def _indicator(self) -> tuple:
+        """(int s_nu + s_tau da, max_i (K_G + D)_ii / (K_A)_ii) of the envelope."""
+        w = self.side.weights
+        diag = self.diag_KG + self.sq_nu @ (w * self.normal) + self.sq_tau @ (w * self.tangent)
+        return float(w @ (self.normal + self.tangent)), float(np.max(diag / self.diag_KA))
+
+    def estimate_now(self) -> Estimate:
+        """lambda_max for the envelope (warm started from the last eigenvector)."""
+        w = self.side.weights
+        K = self.KG + self.T_nu.T @ sp.diags(w * self.normal) @ self.T_nu
+        for T in self.T_tau:
+            K = K + T.T @ sp.diags(w * self.tangent) @ T
+        free, full_in, full_out = self.free, self._in, self._out
+
+        def apply_inverse(x):
+            full_in[free] = np.ravel(x)
+            self.solver.solve(full_in, full_out)
+            return full_out[free].copy()
+
+        v0 = self._vector if self._vector is not None else np.ones(free.size)
+        lam, self._vector = _largest_eigenvalue(K.tocsr(), self.KA, apply_inverse, v0)
+        self.indicator = self._indicator()
+        self.updates += 1
+        self.estimate = Estimate(2.0 / lam, lam, float(self.normal.max(initial=0.0)),
+                                 float(self.tangent.max(initial=0.0)),
+                                 (int(np.count_nonzero(self.normal)), int(np.count_nonzero(self.tangent)),
+                                  self.side.points))
+        return self.estimate
+
+    def state(self) -> dict:
+        return {"step_limit_normal": self.normal.copy(), "step_limit_tangent": self.tangent.copy(),
+                "step_limit": [*self.indicator, float(self.updates)]
+                + ([self.estimate.k_crit, self.estimate.lambda_max] if self.estimate else [])}
+
+    def restore(self, state: dict) -> None:
+        self.normal[:], self.tangent[:] = state["step_limit_normal"], state["step_limit_tangent"]
+        numbers = list(state["step_limit"])
+        self.indicator, self.updates = (numbers[0], numbers[1]), int(numbers[2])
+        if len(numbers) == 5:
+            self.estimate = Estimate(numbers[3], numbers[4], float(self.normal.max(initial=0.0)),
+                                     float(self.tangent.max(initial=0.0)),
+                                     (int(np.count_nonzero(self.normal)), int(np.count_nonzero(self.tangent)),
+                                      self.side.points))
+
+
+def check(k: float, estimate: Estimate, bound: Estimate | None = None) -> None:
+    """Raise :class:`StepTooLarge` with the estimate and the ways out when k > k_crit (``bound``: the limit with
+    every spring acting, said too when it is lower: the run may reach it)."""
     if k > estimate.k_crit:
+        also = ""
+        if bound is not None and bound.k_crit < 0.99 * estimate.k_crit:
+            also = (f"; with every spring acting, which later states may reach, k_crit = {bound.k_crit:.3g} s")
         raise StepTooLarge(
             f"k = {k:.3g} s exceeds the predicted stability limit of the explicit scheme, "
-            f"k_crit = {estimate.k_crit:.3g} s (2 / lambda_max of K_A^-1 (K_G + springs); boundary springs: "
-            f"normal {estimate.spring_normal:.3g}, tangential {estimate.spring_tangential:.3g} Pa/m). "
+            f"k_crit = {estimate.k_crit:.3g} s (2 / lambda_max of K_A^-1 (K_G + springs); {estimate.describe()}"
+            f"{also}). "
             f"Ways out: k <= {0.9 * estimate.k_crit:.2g}, or scheme = 'implicit' (stable), "
             "or allow_unstable = true to run anyway (recorded in the results).")

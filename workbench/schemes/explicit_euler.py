@@ -12,14 +12,18 @@ a matvec with the matrix assembled once; the contact terms and the bonding rate 
 evaluated at the contact quadrature points with trace operators assembled once
 (:mod:`workbench.boundary`): one back-substitution per step and vector work.
 Contact is lagged, so the scheme is only conditionally stable: k < k_crit, which
-:meth:`ExplicitEuler.preflight` predicts before the run (:mod:`workbench.stability`).
+:meth:`ExplicitEuler.preflight` predicts before the run for the springs that act at the
+start (and within a trial first step), and which every step re-checks against the springs
+of its state (:class:`workbench.stability.StepLimit`).
 """
 from __future__ import annotations
 
+import warnings
 
 import numpy as np
 
 from .. import solvers, stability
+from ..errors import StepLimitExceeded
 from ..physics.ops import NP
 from .base import KelvinVoigtScheme
 
@@ -44,24 +48,76 @@ class ExplicitEuler(KelvinVoigtScheme):
         self.beta_np = d.beta.vec.FV().NumPy() if d.beta is not None else None
         self.tangential = self.contact.tangential and d.side is not None and bool(d.side.T_tau)
         delta = d.model.loads.delta  # the rod's end moves in time: the velocity is lifted on the clamp
-        self.v_clamp = None
+        self.v_clamp, self.limit = None, None
         if delta is not None and delta.depends_on("t"):
             self.v_clamp = d.u.vec.CreateVector()
             self.v_clamp.FV().NumPy()[:] = 0.0  # CreateVector does not initialise
 
     def preflight(self, k_max: float) -> dict:
-        """Refuse k above the predicted stability limit (unless allow_unstable, recorded)."""
+        """Refuse k above the predicted stability limit of the springs that act at the start (unless
+        allow_unstable, recorded). The returned attributes ``k_crit_min`` and ``k_crit_updates`` follow the run's
+        re-checks (:meth:`_recheck`)."""
         d = self.d
-        est = stability.critical_step(d, self.solver)
-        checks = {"k_crit": est.k_crit, "stability_override": 0} | self.bonding_check(k_max)
+        self.limit = None
+        if d.side is None:
+            est = stability.critical_step(d, self.solver)
+        else:  # the springs of u0 and of the state one trial step reaches (a body at a kink: which side it goes)
+            limit = stability.StepLimit(d, self.solver)
+            start = self.state()
+            limit.absorb(*self._springs(limit))
+            self.step(0.0, k_max)  # (self.limit is None: no re-check in it)
+            limit.absorb(*self._springs(limit))
+            self.restore(start)
+            self.limit = limit
+            est = limit.estimate_now()
+        self.checks = {"k_crit": est.k_crit, "k_crit_min": est.k_crit, "k_crit_updates": 0,
+                       "stability_override": 0} | self.bonding_check(k_max)
         self._override = None
         if k_max > est.k_crit:
             if not d.scene["allow_unstable"]:
-                stability.check(k_max, est)
-            checks["stability_override"] = 1
+                stability.check(k_max, est, stability.critical_step(d, self.solver) if self.limit else None)
+            self.checks["stability_override"] = 1
             self._override = (f"k = {k_max:.3g} s > predicted k_crit = {est.k_crit:.3g} s: running the explicit "
                               "scheme anyway (allow_unstable)")
-        return checks
+        return self.checks
+
+    def _springs(self, limit, u_nu=None, beta_q=None):
+        """The acting springs at the current state (:meth:`workbench.stability.StepLimit.slopes`)."""
+        d, side = self.d, self.d.side
+        u = self.u_np
+        if beta_q is None and self.beta_np is not None:
+            beta_q = self.beta_np[d.beta_dofs][side.element]
+        u_nu = side.u_nu(u) if u_nu is None else u_nu
+        return limit.slopes(u_nu, side.u_tau(u) if limit.tangential else None, beta_q)
+
+    def _recheck(self, k, t, u_nu, beta_q):
+        """Stop (or, with allow_unstable, warn once) when the state's springs have grown so that k exceeds the
+        limit they set; the steps before are kept (:class:`~workbench.errors.StepLimitExceeded`)."""
+        lim = self.limit
+        springs = self._springs(lim, u_nu, beta_q)
+        if not lim.grows(*springs) or not lim.absorb(*springs):
+            return
+        first = lim.estimate.k_crit
+        est = lim.estimate_now()
+        self.checks["k_crit_min"] = min(self.checks["k_crit_min"], est.k_crit)
+        self.checks["k_crit_updates"] = lim.updates - 1
+        if k <= est.k_crit or self.checks["stability_override"] == 2:
+            return
+        message = (f"{self.d.scene.name}: the contact state changed at t = {t:.6g} s: the explicit scheme's stability "
+                   f"limit is now k_crit = {est.k_crit:.3g} s (it was {first:.3g} s), below k = {k:.3g} s "
+                   f"({est.describe()}). Ways out: k <= {0.9 * est.k_crit:.2g} s, or scheme = 'implicit' "
+                   "(stable), or allow_unstable = true to run on (recorded)")
+        if not self.d.scene["allow_unstable"]:
+            raise StepLimitExceeded(message + "; the steps computed so far are kept", time=t)
+        self.checks["stability_override"] = 2
+        warnings.warn(message + ": running on (allow_unstable)", RuntimeWarning, stacklevel=2)
+
+    def _extra_state(self) -> dict:
+        return self.limit.state() if self.limit is not None else {}
+
+    def _restore_extra(self, extra: dict) -> None:
+        if extra and self.limit is not None:
+            self.limit.restore(extra)
 
     def warnings(self) -> list:
         return ([self._override] if getattr(self, "_override", None) else []) + super().warnings()
@@ -77,7 +133,10 @@ class ExplicitEuler(KelvinVoigtScheme):
             side = d.side
             beta_f = self.beta_np[d.beta_dofs] if self.beta_np is not None else None
             beta_q = beta_f[side.element] if beta_f is not None else None
-            p = self.contact.normal(NP, side.u_nu(u), beta_q, side.gap0)
+            u_nu = side.u_nu(u)
+            if self.limit is not None:
+                self._recheck(k, t_prev, u_nu, beta_q)
+            p = self.contact.normal(NP, u_nu, beta_q, side.gap0)
             q = self.contact.tangential_traction(NP, side.u_tau(u), beta_q) if self.tangential else None
             if p is not None or q is not None:
                 self.rhs_np -= side.integrate(p, q)
