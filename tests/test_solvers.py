@@ -36,3 +36,61 @@ def test_auto_takes_the_band_only_when_it_is_narrow_and_small(monkeypatch):
     monkeypatch.setattr(solvers, "BAND_BYTES", 0.5 * band)
     assert solvers.factor(d.viscous.mat, d.fes.FreeDofs(), d.u.vec).name == "sparsecholesky"
     assert solvers.factor(d.viscous.mat, d.fes.FreeDofs(), d.u.vec, "banded").name == "banded"  # asked for: kept
+
+
+@pytest.mark.parametrize("name, kw", [("block", dict(h=0.05, order=2)), ("slab", dict(h=0.00625))])
+def test_cg_solves_the_same_systems(name, kw):
+    """solver = 'cg' (AMG-preconditioned CG on the rigid-body modes) solves K_A x = b as the sparse factor does, to
+    its relative residual CG_TOL or to the round-off the direct solve itself reaches (the thin P1 slab: 1e-11 ||b||,
+    measured); warm started from a nearby solution it needs fewer iterations."""
+    d = discretisation.build(workbench.scene(name, **kw))
+    rhs = np.random.default_rng(0).standard_normal(d.ndof)
+    direct = solvers.factor(d.viscous.mat, d.fes.FreeDofs(), d.u.vec, "sparsecholesky")
+    cg = solvers.factor(d.viscous.mat, d.fes.FreeDofs(), d.u.vec, "cg", fes=d.fes)
+    a, b = np.zeros(d.ndof), np.zeros(d.ndof)
+    direct.solve(rhs, a)
+    cg.solve(rhs, b)
+    free = np.array(d.fes.FreeDofs(), dtype=bool)
+    assert np.all(b[~free] == 0)
+    K = solvers.to_scipy(d.viscous.mat)
+    floor = np.linalg.norm((K @ a - rhs)[free])
+    assert np.linalg.norm((K @ b - rhs)[free]) <= max(1.01 * solvers.CG_TOL * np.linalg.norm(rhs[free]), 10 * floor)
+    assert np.abs(a - b).max() < 1e-7 * np.abs(a).max()
+    cold = cg.last_iterations
+    cg.solve(rhs * (1 + 1e-4), b)  # out holds the last solution: the warm start
+    assert cg.last_iterations < cold
+
+
+def test_rigid_body_modes_are_exact():
+    """The modes are in the kernel of the unconstrained stiffness (2D: 3, 3D: 6)."""
+    import ngsolve as ngs
+
+    from workbench.physics import kelvin_voigt
+
+    for name in ("slab", "block"):
+        sc = workbench.scene(name, h=0.1, order=2)
+        m = sc.model_of()
+        mesh = m.geometry.mesh()
+        fes = ngs.VectorH1(mesh, order=2)
+        B = solvers.rigid_body_modes(fes)
+        K = solvers.to_scipy(discretisation.stiffness(fes, m.viscous, m.geometry.dim).mat)
+        assert B.shape[1] == (3 if name == "slab" else 6)
+        assert np.abs(K @ B).max() < 1e-9 * np.abs(K).max() * np.abs(B).max()
+
+
+def test_auto_takes_cg_for_a_large_3d_explicit_run_only(monkeypatch):
+    """auto resolves to cg for the explicit scheme in 3D when the sparse factor would exceed FACTOR_BYTES; the run
+    then agrees with the direct solver (u at the probes to 1e-9), records its iterations, and estimates k_crit with
+    LOBPCG (agreeing with Lanczos to 1e-6); the implicit schemes refuse cg by name."""
+    kw = dict(order=2, h=0.1, T=0.01, k=0.002, c_nu=100.0)
+    direct = workbench.run("block", progress=False, **kw)
+    monkeypatch.setattr(solvers, "FACTOR_BYTES", 1.0)
+    assert solvers.choose("auto", 3, direct.attrs["ndof"], True) == "cg"
+    assert solvers.choose("auto", 3, direct.attrs["ndof"], False) == "auto"
+    ds = workbench.run("block", progress=False, **kw)
+    assert direct.attrs["linear_solver"] == "sparsecholesky" and ds.attrs["linear_solver"] == "cg"
+    assert np.abs(ds.u_probe - direct.u_probe).max() < 1e-9 * np.abs(direct.u_probe).max()
+    assert abs(ds.attrs["k_crit"] / direct.attrs["k_crit"] - 1) < 1e-6
+    assert ds.cg_iterations[0] == 0 and (ds.cg_iterations[1:] > 0).all()
+    with pytest.raises(workbench.ParameterError, match="solver = 'cg'"):
+        workbench.scene("block", scheme="implicit", solver="cg")

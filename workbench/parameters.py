@@ -250,8 +250,9 @@ PARAMETERS: dict[str, Param] = {p.name: p for p in [
     _p("allow_unstable", False, "", "run the explicit scheme even when k exceeds its predicted stability limit",
        "flag"),
     _p("solver", "auto", "", "linear solver for the constant matrix: banded Cholesky (RCM order), NGSolve's "
-       "sparsecholesky or umfpack; auto = banded when the bandwidth is small", "choice",
-       choices=("auto", "banded", "sparsecholesky", "umfpack")),
+       "sparsecholesky or umfpack, or cg (AMG-preconditioned conjugate gradients, explicit scheme only); auto = banded "
+       "when the bandwidth is small, cg for the explicit scheme in 3D when a sparse factor would exceed 2 GB",
+       "choice", choices=("auto", "banded", "sparsecholesky", "umfpack", "cg")),
     # material
     _p("E", 1000.0, "Pa", "Young's modulus (elasticity G)", **_POS),
     _p("nu", 0.3, "1", "Poisson's ratio (elasticity G)", lower=-1.0, upper=0.5, lower_open=True, upper_open=True),

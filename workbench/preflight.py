@@ -40,8 +40,12 @@ def available_memory() -> float:
     return math.inf
 
 
-def estimate(geometry, order: int) -> Estimate:
-    """Displacement dofs and bytes to assemble and factor the constant matrix (order of magnitude)."""
+def estimate(geometry, order: int, solver: str = "auto", iterative: bool = False) -> Estimate:
+    """Displacement dofs and bytes to assemble and factor the constant matrix (order of magnitude); with ``solver =
+    "cg"``, or ``"auto"`` where it resolves to cg (``iterative``: the explicit scheme, :func:`workbench.solvers.choose`),
+    the matrix copy and the AMG hierarchy of the iterative solver instead of a factor."""
+    from .solvers import choose, sparse_factor_bytes
+
     dim = geometry.dim
     vertices = geometry.vertex_count()
     ndof = dim * vertices * order ** dim  # P_p: about p^d scalar dofs per vertex on simplices
@@ -53,21 +57,24 @@ def estimate(geometry, order: int) -> Estimate:
         dissection = 8.0 * 30.0 * ndof * max(1.0, math.log2(ndof))
         factor = min(banded, dissection)
     else:
-        factor = 8.0 * 31.0 * ndof ** (4.0 / 3.0)  # measured: P2 block, 271k dofs, sparsecholesky 4.3 GB
+        factor = sparse_factor_bytes(dim, ndof)  # measured: P2 block, 271k dofs, sparsecholesky 4.3 GB
     matrices = 8.0 * 3 * ndof * (9 * order ** dim) * dim  # K_A, K_G (and M): about 9 p^d dim entries per row
+    if choose(solver, dim, ndof, iterative) == "cg":
+        factor = 1.5 * matrices  # SciPy's copy of K_A, the AMG levels, CG's vectors (a run at 271k dofs: 2.1 GB peak)
     return Estimate(int(ndof), factor + matrices)
 
 
 def resources(scene, model, n_steps: int) -> None:
     """Refuse, before any work, a run whose factorisation cannot fit in the free memory."""
-    est = estimate(model.geometry, scene["order"])
+    est = estimate(model.geometry, scene["order"], scene["solver"], scene["scheme"] == "explicit")
     free = available_memory()
     if est.bytes > 0.9 * free:
         which = "h" if not any(scene.values.get(n, 0) for n in model.geometry.cell_names) else "nx/ny/nz"
         raise ParameterError(f"{which} = {scene['h']:g} (order {scene['order']}) gives about {est.ndof:.2g} "
                              f"displacement dofs; assembling and factoring them needs about {est.bytes / 2**30:.3g} GB, "
                              f"more than the {free / 2**30:.3g} GB this machine has free: use a larger h or a lower "
-                             "order")
+                             "order" + ("" if scene["scheme"] != "explicit" or scene["solver"] == "cg" else
+                                        ", or solver = 'cg' (no factor)"))
 
 
 #: Presets that keep the paper's P1 elements on purpose (documented in docs/choices.md).

@@ -55,6 +55,7 @@ VARIABLES = {
     "u_edges": ("m", "displacement at the edge midpoints (elements of order >= 2)"),
     "snapshot_time": ("s", "time of the field snapshot"),
     "newton_iterations": ("1", "semismooth Newton iterations in the time step (all coupling passes)"),
+    "cg_iterations": ("1", "conjugate gradient iterations of the time step's solve (solver = 'cg')"),
     "step_size": ("s", "accepted time step ending at this time (error-controlled steps)"),
     "error_estimate": ("1", "scaled local error estimate of the step (<= 1: within rtol, atol)"),
     "coupling_passes": ("1", "passes of the (u, beta) coupling iteration in the time step"),

@@ -367,6 +367,10 @@ def _check_consistency(name, body, v, model="A"):
             raise ParameterError(f"order = {v['order']}: Model B constrains the contact nodes (K_h): order 1, or 2 on "
                                  f"a 2D body (vertices and facet midpoints); allowed here: order "
                                  f"{'1 | 2' if body.dim == 2 else '1'}")
+    if v["solver"] == "cg" and v["scheme"] != "explicit":
+        raise ParameterError(f"solver = 'cg' (iterative) applies to the explicit scheme only; scheme = "
+                             f"{v['scheme']!r} condenses on the contact dofs, one solve per contact dof: use "
+                             "solver = 'auto' (a direct factor) or scheme = 'explicit'")
     if v["k"] > v["T"]:
         raise ParameterError(f"k = {v['k']:g} is larger than T = {v['T']:g}; allowed: 0 < k <= T")
     if v.get("rtol", 0) > 0:

@@ -38,7 +38,8 @@ class ExplicitEuler(KelvinVoigtScheme):
     def __init__(self, disc):
         super().__init__(disc)
         d = self.d
-        self.solver = solvers.factor(d.viscous.mat, d.fes.FreeDofs(), d.u.vec, d.scene["solver"])
+        method = solvers.choose(d.scene["solver"], d.dim, d.ndof, iterative=True)
+        self.solver = solvers.factor(d.viscous.mat, d.fes.FreeDofs(), d.u.vec, method, fes=d.fes)
         self.rhs = d.u.vec.CreateVector()
         self.rhs_np, self.v_np, self.u_np = self.rhs.FV().NumPy(), d.v.vec.FV().NumPy(), d.u.vec.FV().NumPy()
         self.work = d.u.vec.CreateVector()
@@ -71,7 +72,7 @@ class ExplicitEuler(KelvinVoigtScheme):
             self.limit = limit
             est = limit.estimate_now()
         self.checks = {"k_crit": est.k_crit, "k_crit_min": est.k_crit, "k_crit_updates": 0,
-                       "stability_override": 0} | self.bonding_check(k_max)
+                       "stability_override": 0, "linear_solver": self.solver.name} | self.bonding_check(k_max)
         self._override = None
         if k_max > est.k_crit:
             if not d.scene["allow_unstable"]:
@@ -111,6 +112,12 @@ class ExplicitEuler(KelvinVoigtScheme):
             raise StepLimitExceeded(message + "; the steps computed so far are kept", time=t)
         self.checks["stability_override"] = 2
         warnings.warn(message + ": running on (allow_unstable)", RuntimeWarning, stacklevel=2)
+
+    def diagnostics(self) -> dict:
+        """With solver = 'cg': the iterations of the last step's solve."""
+        if self.solver.name != "cg":
+            return {}
+        return {"cg_iterations": self.solver.last_iterations if self.k_last else 0}  # (0 at the start)
 
     def _extra_state(self) -> dict:
         return self.limit.state() if self.limit is not None else {}
