@@ -74,6 +74,11 @@ VARIABLES = {
     "facet": ("1", "contact facet index"),
     "stress_component": ("1", "stress tensor component"),
     "probe_x": ("m", "probe x"), "probe_y": ("m", "probe y"), "probe_z": ("m", "probe z"),
+    "midpoint_x": ("m", "contact facet midpoint x (Model B on P2: its contact points besides the vertices)"),
+    "midpoint_y": ("m", "contact facet midpoint y"),
+    "midpoint_weight": ("m", "the midpoint's share of the contact side (Simpson: 2/3 of its facet)"),
+    "contact_pressure_midpoint": ("Pa", "contact pressure at the facet midpoints (Model B on P2)"),
+    "contact_state_midpoint": ("1", "contact state at the facet midpoints (as contact_state)"),
     "node_weight": ("m", "the contact vertex's share of the contact side, int phi_i da (m^2 in 3D; per unit "
                     "thickness in 2D): nodal force / node_weight = pressure"),
     "node_x": ("m", "contact vertex x"), "node_y": ("m", "contact vertex y"), "node_z": ("m", "contact vertex z"),
@@ -137,6 +142,7 @@ class Recorder:
         self.times, self.steps = [], []
         self.u_probe, self.u_contact, self.beta = [], [], []
         self.extra, self.node_extra = {}, {}  # per-record diagnostics, per-contact-node values
+        self.point_extra, self.points, self.weights = {}, {}, None  # per other contact point; their coordinates
         self.snaps = []  # (time, u_dofs, stress, von_mises)
         self.step = -1
 
@@ -154,7 +160,7 @@ class Recorder:
         """Keep every other record (the first and last kept) and record every other step from now on."""
         keep = list(range(0, len(self.times) - 1, 2)) + [len(self.times) - 1]
         for seq in [self.times, self.steps, self.u_probe, self.u_contact, self.beta,
-                    *self.extra.values(), *self.node_extra.values()]:
+                    *self.extra.values(), *self.node_extra.values(), *self.point_extra.values()]:
             if seq:
                 seq[:] = [seq[i] for i in keep]
         self.stride *= 2
@@ -178,6 +184,10 @@ class Recorder:
                 self.extra.setdefault(key, []).append(val)
             for key, arr in scheme.node_values(t).items():
                 self.node_extra.setdefault(key, []).append(np.asarray(arr))
+            if self.weights is None:
+                self.weights, self.points = scheme.node_weights(), scheme.contact_points()
+            for key, arr in scheme.point_values(t).items():
+                self.point_extra.setdefault(key, []).append(np.asarray(arr))
             assert all(len(v) == i + 1 for v in self.extra.values()), "diagnostics must be given at every record"
             if self.every_step and len(self.times) > self.max_records:
                 self._decimate()
@@ -200,6 +210,7 @@ class Recorder:
         self.beta = list(ds.beta.values) if "beta" in ds else []
         self.extra = {n: list(v.values) for n, v in ds.data_vars.items() if v.dims == ("time",)}
         self.node_extra = {n: list(v.values) for n, v in ds.data_vars.items() if v.dims == ("time", "node")}
+        self.point_extra = {n: list(v.values) for n, v in ds.data_vars.items() if v.dims == ("time", "midpoint")}
         self.snaps = []
         for i, t in enumerate(ds.snapshot_time.values if "snapshot_time" in ds.coords else []):
             if any(abs(t - s) <= self.tol for s in self.snapshot_times):
@@ -234,7 +245,8 @@ class Recorder:
             coords[f"probe_{COMPONENTS[c]}"] = _var("probe", probes[:, c], f"probe_{COMPONENTS[c]}")
             coords[f"node_{COMPONENTS[c]}"] = _var("node", d.node_xyz[:, c], f"node_{COMPONENTS[c]}")
         if dim > 1:
-            coords["node_weight"] = _var("node", d.node_weights, "node_weight")
+            coords["node_weight"] = _var("node", d.node_weights if self.weights is None else self.weights,
+                                         "node_weight")
             coords["node_weight"].attrs["units"] = "m" if dim == 2 else "m^2"
         shape = (0, len(probes), dim)
         data = {
@@ -252,6 +264,10 @@ class Recorder:
             data[key] = _var("time", np.asarray(vals), key)
         for key, arrs in self.node_extra.items():
             data[key] = _var(("time", "node"), np.stack(arrs), key)
+        for key, values in self.points.items():
+            coords[key] = _var("midpoint", values, key)
+        for key, arrs in self.point_extra.items():
+            data[key] = _var(("time", "midpoint"), np.stack(arrs), key)
         if self.snaps:
             coords["snapshot_time"] = _var("snapshot", np.array([s[0] for s in self.snaps]), "snapshot_time")
             coords["stress_component"] = _var("stress_component", list(STRESS_COMPONENTS[dim]), "stress_component")

@@ -60,8 +60,8 @@ def lee_radok(t: float, rate: float, R: float, E: float, nu: float, tau: float, 
 def profile(ds, time=None):
     """The contact pressure of a ``hertz`` run at ``time`` (default: its last) against Hertz's for the load then.
 
-    Returns a dict: ``a`` (Hertz), ``a_last`` / ``a_next`` (the farthest contact vertex with a positive
-    pressure, the nearest without), ``a_fit`` (the half-width of the Hertz profile fitted to the pressure:
+    Returns a dict: ``a`` (Hertz), ``a_last`` / ``a_next`` (the farthest contact point with a positive
+    pressure, the nearest without; the points are the vertices, and on P2 Model B's facet midpoints too), ``a_fit`` (the half-width of the Hertz profile fitted to the pressure:
     p^2 linear in r^2), ``l2`` (the relative L2 error of the pressure over the contact side
     within 2 a, by the nodal weights), ``force`` (the contact force over the load's share that the modelled
     part carries), ``x``, ``p``, ``p_hertz`` (by distance from the apex).
@@ -84,6 +84,11 @@ def profile(ds, time=None):
         share = P / 2.0  # the half x >= 0
     p = ds.contact_pressure.values[i]
     w = ds.node_weight.values
+    if "contact_pressure_midpoint" in ds:  # Model B on P2: the facet midpoints are contact points too
+        rm = np.abs(ds.midpoint_x.values) if not three else np.hypot(ds.midpoint_x.values, ds.midpoint_y.values)
+        r = np.concatenate([r, rm])
+        p = np.concatenate([p, ds.contact_pressure_midpoint.values[i]])
+        w = np.concatenate([w, ds.midpoint_weight.values])
     order = np.argsort(r)
     r, p, w = r[order], p[order], w[order]
     ph = p_of(r)

@@ -48,6 +48,9 @@ the state u, v and, for Model A, beta) from one time to the next. The time loop
     :data:`workbench.results.VARIABLES`).
 ``node_values() -> dict``
     Arrays per contact node (Model B: pressure and state); empty by default.
+``node_weights()``, ``contact_points()``, ``point_values() -> dict``
+    Each vertex's share of the side for those pressures; other contact points with unknowns
+    (Model B on P2: the facet midpoints, coordinates and weights) and arrays per point.
 ``stress_parts() -> [(tensor, dof vector), ...]``
     sigma at the current state as a sum of linear tensors applied to the strains of
     dof vectors (Model A: A eps(v) + G eps(u); Model B: A eps(u) + the memory). The
@@ -230,6 +233,19 @@ class Scheme:
 
     def node_values(self, t: float | None = None) -> dict:
         """Per contact vertex, what the run records at time t (e.g. the contact pressure)."""
+        return {}
+
+    def node_weights(self) -> np.ndarray:
+        """Each contact vertex's share of the side, by which its recorded pressure becomes a force."""
+        return self.d.node_weights
+
+    def contact_points(self) -> dict:
+        """Coordinates (``midpoint_x``, ...) and weights (``midpoint_weight``) of contact points other than the
+        vertices at which the scheme has unknowns (Model B on P2: the facet midpoints); empty by default."""
+        return {}
+
+    def point_values(self, t: float | None = None) -> dict:
+        """Per point of :meth:`contact_points`, what the run records at time t."""
         return {}
 
     def stress_parts(self) -> list:

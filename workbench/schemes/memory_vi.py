@@ -123,6 +123,8 @@ class MemoryVI(Scheme):
         self.B = sp.vstack([rows_v, mid.T_nu]).tocsr()
         self.w = np.concatenate([w_v[self.active_nodes], 2.0 * facet_len / 3.0])
         self.vertex_weights = w_v
+        corners = [[d.mesh[v].point for v in el.vertices] for el in d.mesh.Boundaries(d.contact_name).Elements()]
+        self.midpoints = np.asarray([np.mean(c, axis=0) for c in corners])[mid.element]  # (in point order)
         self.n_vertex_points = self.active_nodes.size
         if self.g0 is not None:
             self.g0 = np.concatenate([self.g0, mid.gap0])
@@ -458,11 +460,34 @@ class MemoryVI(Scheme):
             # R = (M u - (f - memory)) at its normal dof, pushing the body out of the foundation
             self.work.data = self.M * d.u.vec
             dofs = d.normal_dofs[self.pinned]
-            reaction = -self.sign * (self.work.FV().NumPy()[dofs] - self._balance[dofs])
+            residual = self.work.FV().NumPy()[dofs] - self._balance[dofs]
+            if self.B is not None:  # P2: the forces of the adjacent facet midpoints act on the held vertex's dof too
+                residual = residual + (self.B.T @ self.lam)[dofs]
+            reaction = -self.sign * residual
             weights = self.vertex_weights[self.pinned]
             pressure[self.pinned] = reaction / weights
             state[self.pinned] = unilateral.STUCK if self.layer.g > 0 or self.layer.F > 0 else unilateral.RIGID
         return {"contact_pressure": pressure, "contact_state": state}
+
+    def node_weights(self) -> np.ndarray:
+        """Each contact vertex's share of the side as the pressures use it (P2: Simpson's, 1/6 of each facet)."""
+        return self.vertex_weights
+
+    def contact_points(self) -> dict:
+        """P2: the facet midpoints, the other contact points (coordinates and their Simpson weight, 2/3 of the
+        facet), so that the archive's pressures close the force balance with those of the vertices."""
+        if self.B is None:
+            return {}
+        d, m = self.d, self.n_vertex_points
+        out = {f"midpoint_{c}": self.midpoints[:, i] for i, c in enumerate("xyz"[: d.dim])}
+        return out | {"midpoint_weight": self.w[m:]}
+
+    def point_values(self, t: float | None = None) -> dict:
+        """P2: the contact pressure lam / w and the state at the facet midpoints."""
+        if self.B is None:
+            return {}
+        m = self.n_vertex_points
+        return {"contact_pressure_midpoint": self.lam[m:] / self.w[m:], "contact_state_midpoint": self.states[m:]}
 
     def stress_parts(self) -> list:
         """sigma_n = A eps(u_n) + M_n (M_n from the memory histories)."""
