@@ -208,3 +208,21 @@ def test_both_model_a_schemes_on_a_curved_body():
         workbench.run(sc, scheme="explicit", k=1.5 * ds.attrs["k_crit"], progress=False)
 
 
+
+
+def test_the_contact_zone_follows_the_parameter():
+    """contact_zone sets the part of the curved side that is the contact boundary (refined with h_contact): the
+    contact vertices lie within contact_zone x radius of the apex and reach its edge; a smaller zone has fewer
+    vertices and, while it holds Hertz's contact radius, the same answer (force exact, pressure within 1 % of the
+    default zone's error); a load whose contact radius nears the zone's edge is warned about by name."""
+    runs = {z: workbench.run("memory_hertz3d", h_contact=0.02, contact_zone=z, progress=False) for z in (0.3, 0.24)}
+    for z, ds in runs.items():
+        r = np.hypot(ds.node_x.values, ds.node_y.values)
+        assert r.max() <= z * 1.0 + 1e-9 and r.max() > z - 0.02
+    assert runs[0.24].sizes["node"] < 0.8 * runs[0.3].sizes["node"]
+    errors = [hertz.profile(ds)["l2"] for ds in runs.values()]
+    assert abs(errors[1] - errors[0]) < 0.01 and hertz.profile(runs[0.24])["force"] == pytest.approx(1.0, abs=1e-9)
+    with pytest.warns(RuntimeWarning, match="increase contact_zone"):
+        workbench.run("memory_hertz3d", h_contact=0.04, contact_zone=0.2, progress=False)
+    with pytest.raises(workbench.ParameterError, match="contact_zone"):
+        workbench.scene("memory_hertz3d", contact_zone=0.95)

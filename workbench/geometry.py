@@ -385,13 +385,15 @@ class _Indenter(Geometry):
     extent_names, cell_names = ("radius",), ()
     curved, pins_contact = True, True
 
-    def __init__(self, h, cells=(), radius=1.0, h_contact=0.0):
+    def __init__(self, h, cells=(), radius=1.0, h_contact=0.0, contact_zone=None):
         super().__init__(h, cells, radius=radius)
         self.h_contact = float(h_contact) if h_contact else self.h / 10.0
+        self.contact_zone = float(contact_zone) if contact_zone else CONTACT_ZONE
 
     @classmethod
     def from_values(cls, values):
-        return cls(values["h"], (), radius=values["radius"], h_contact=values.get("h_contact", 0.0))
+        return cls(values["h"], (), radius=values["radius"], h_contact=values.get("h_contact", 0.0),
+                   contact_zone=values.get("contact_zone"))
 
     @property
     def bbox(self):
@@ -399,7 +401,7 @@ class _Indenter(Geometry):
         return ((0.0, R),) * self.dim
 
     def _netgen(self):
-        return _indenter_mesh(self.kind, self.extent[0], self.h, self.h_contact)
+        return _indenter_mesh(self.kind, self.extent[0], self.h, self.h_contact, self.contact_zone)
 
     def mesh(self):
         import ngsolve as ngs
@@ -426,7 +428,7 @@ class _Indenter(Geometry):
         return 1.0
 
     def key(self):
-        return (self.kind, self.extent, self.h, self.h_contact)
+        return (self.kind, self.extent, self.h, self.h_contact, self.contact_zone)
 
     def warnings(self, values):
         """Hertz's contact radius for the largest load near the edge of the contact zone (beyond it the side is free,
@@ -442,12 +444,12 @@ class _Indenter(Geometry):
             return []
         R = self.extent[0]
         a = (hertz.cylinder if self.dim == 2 else hertz.sphere)(P, R, values["E"], values["nu"])[0]
-        zone = CONTACT_ZONE * R
+        zone = self.contact_zone * R
         if a <= 0.8 * zone:
             return []
         return [f"load = {P:g} gives Hertz's contact radius a = {a:.3g} m, near or beyond the contact zone (the part "
                 f"of the curved side within {zone:.3g} m of the apex, refined, that can touch the foundation): reduce "
-                "the load or increase radius"]
+                "the load, or increase contact_zone or radius"]
 
     def nested_in(self, finer):
         return False
@@ -505,8 +507,9 @@ class Hemisphere(_Indenter):
 _INDENTERS: dict = {}
 
 
-#: The zone around the apex: the contact side within CONTACT_ZONE R of it is meshed with h_contact, the body
-#: beneath it (CONTACT_ZONE R wide, half that deep) with ZONE_FACTOR h_contact; the mesh is graded to h beyond.
+#: The zone around the apex (the default of the scene parameter ``contact_zone``): the contact side within
+#: CONTACT_ZONE R of it is meshed with h_contact, the body beneath it (CONTACT_ZONE R wide, half that deep) with
+#: ZONE_FACTOR h_contact; the mesh is graded to h beyond.
 #: Only that part of the curved side is the contact boundary (``curved``; the rest, ``flank``, is free, with an
 #: initial gap of at least R (1 - sqrt(1 - CONTACT_ZONE^2)) = 0.046 R): the scene warns when Hertz's contact
 #: radius for the largest load comes near the zone's edge.
@@ -515,23 +518,24 @@ _INDENTERS: dict = {}
 CONTACT_ZONE, ZONE_FACTOR = 0.3, 4.0
 
 
-def _indenter_mesh(kind, R, h, h_contact):
-    """The netgen mesh of a Hertz body (OCC), refined in the contact zone; made once per process and size."""
-    key = (kind, R, h, h_contact)
+def _indenter_mesh(kind, R, h, h_contact, contact_zone=CONTACT_ZONE):
+    """The netgen mesh of a Hertz body (OCC), refined in the contact zone (``contact_zone`` R around the apex); made
+    once per process and size."""
+    key = (kind, R, h, h_contact, contact_zone)
     if key in _INDENTERS:
         return _INDENTERS[key]
     import math
 
     from netgen.occ import Z, ArcOfCircle, Box, Cylinder, Face, Glue, MoveTo, OCCGeometry, Pnt, Segment, Sphere, Wire
 
-    tol, w = 1e-9 * R, CONTACT_ZONE * R
+    tol, w = 1e-9 * R, contact_zone * R
 
     def on_circle(c):
         return abs(math.sqrt(c.x ** 2 + c.y ** 2 + c.z ** 2 - 2 * R * (c.y if kind == "halfdisc" else c.z) + R * R)
                    - R) < 0.1 * R
 
     if kind == "halfdisc":
-        phi = math.asin(CONTACT_ZONE)
+        phi = math.asin(contact_zone)
         arc = lambda a: Pnt(R * math.sin(a), R - R * math.cos(a), 0.0)  # noqa: E731 (the angle from the apex)
         apex, corner, centre = Pnt(0.0, 0.0, 0.0), Pnt(R, R, 0.0), Pnt(0.0, R, 0.0)
         body = Face(Wire([ArcOfCircle(apex, arc(phi / 2), arc(phi)),

@@ -236,6 +236,9 @@ PARAMETERS: dict[str, Param] = {p.name: p for p in [
     _p("radius", 1.0, "m", "radius of the Hertz body (half-disc or hemisphere)", **_POS),
     _p("h_contact", 0.0, "m", "element size at the Hertz body's contact point, graded to h away from it; 0 = h / 10",
        **_NONNEG),
+    _p("contact_zone", 0.3, "1", "the Hertz body's contact side: the part of its curved side within contact_zone x "
+       "radius of the apex, meshed with h_contact (and the body beneath it); the rest is free", lower=0.05,
+       upper=0.9),
     # time
     _p("T", 1.0, "s", "final time", **_POS),
     _p("k", 0.01, "s", "time step (uniform grid; the last step is not longer than k)", **_POS),

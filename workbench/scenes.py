@@ -47,7 +47,7 @@ _UNILATERAL = ("gap", "F", "c")
 _MEMORY = ("kernel", "kernel_E", "kernel_nu", "prony", "memory_rule", "kernel_approximation", "kernel_tol")
 _LOADS = ("body_force", "point_force", "point_force_at")
 _MESH = ("mesh", "boundaries", "mesh_digest")
-_HERTZ = ("radius", "h_contact")
+_HERTZ = ("radius", "h_contact", "contact_zone")
 _HERTZ_LOADS = ("body_force", "load")
 
 
