@@ -7,6 +7,12 @@ normal compliance (Model A, ``hertz``, c_nu = 1e7, tau = 1e-3 s) at three contac
 viscoelastic ramp (Model A, tau = 0.2 s) against Lee and Radok. Writes ``hertz.csv`` (one row per run), the
 pressure profiles (``hertz_profiles.png``) and a(t) (``lee_radok.png``), and prints the table and the observed
 orders of the pressure's L2 error in h_contact.
+
+    python studies/hertz.py --fine3d HC [HC ...] [--contact-zone Z] [--threads N]
+
+runs only ``memory_hertz3d`` at those h_contact (the finer 3D levels: minutes each) with the contact zone Z R
+(default 0.3; 1.25 a = 0.24 holds the contact of the default load with 64 % of the vertices) and appends the rows
+to ``hertz3d_fine.csv``.
 """
 from __future__ import annotations
 
@@ -27,11 +33,40 @@ CASES = [
 ]
 
 
+def fine3d(levels, zone, threads, out):
+    """memory_hertz3d at finer levels (rows appended to hertz3d_fine.csv)."""
+    path = out / "hertz3d_fine.csv"
+    for hc in levels:
+        t0 = time.perf_counter()
+        ds = workbench.run("memory_hertz3d", h_contact=hc, contact_zone=zone, threads=threads, progress=False)
+        wall = time.perf_counter() - t0
+        r = hertz.profile(ds)
+        row = dict(h_contact=hc, contact_zone=zone, threads=threads or 1, ndof=ds.attrs["ndof"],
+                   contact_nodes=ds.sizes["node"], wall_time=round(wall, 1),
+                   setup_time=round(float(ds.attrs["setup_time"]), 1), a=r["a"], a_last=r["a_last"], l2=r["l2"],
+                   force=r["force"])
+        print(f"3D Signorini h_contact {hc:g} zone {zone:g}: ndof {row['ndof']}, {row['contact_nodes']} contact "
+              f"vertices, {wall:.1f} s, L2 {100 * r['l2']:.2f} %, a {r['a']:.4f}, last in contact "
+              f"{r['a_last']:.4f}, force/load {r['force']:.9f}", flush=True)
+        new = not path.exists()
+        with open(path, "a", newline="") as f:
+            w = csv.DictWriter(f, fieldnames=list(row))
+            if new:
+                w.writeheader()
+            w.writerow(row)
+
+
 def main():
     p = argparse.ArgumentParser(description=__doc__.splitlines()[0])
     p.add_argument("--out", default="data/hertz")
-    out = Path(p.parse_args().out)
+    p.add_argument("--fine3d", type=float, nargs="*", default=None)
+    p.add_argument("--contact-zone", type=float, default=0.3)
+    p.add_argument("--threads", type=int, default=None)
+    args = p.parse_args()
+    out = Path(args.out)
     out.mkdir(parents=True, exist_ok=True)
+    if args.fine3d:
+        return fine3d(args.fine3d, args.contact_zone, args.threads, out)
     rows, profiles = [], {}
     for scene, label, extra, levels in CASES:
         errors = []

@@ -244,26 +244,25 @@ class StepLimit:
                                                 getattr(self.solver, "preconditioner", None))
         self.indicator = self._indicator()
         self.updates += 1
-        self.estimate = Estimate(2.0 / lam, lam, float(self.normal.max(initial=0.0)),
-                                 float(self.tangent.max(initial=0.0)),
-                                 (int(np.count_nonzero(self.normal)), int(np.count_nonzero(self.tangent)),
-                                  self.side.points))
+        self.estimate = self._described(lam)
         return self.estimate
 
+    def _described(self, lam: float) -> Estimate:
+        """The estimate lambda_max = ``lam`` of the envelope, with its largest springs and where they act."""
+        acting = (int(np.count_nonzero(self.normal)), int(np.count_nonzero(self.tangent)), self.side.points)
+        return Estimate(2.0 / lam, lam, float(self.normal.max(initial=0.0)), float(self.tangent.max(initial=0.0)),
+                        acting)
+
     def state(self) -> dict:
+        """The envelope and the last estimate, as copies (a restart goes on with them)."""
         return {"step_limit_normal": self.normal.copy(), "step_limit_tangent": self.tangent.copy(),
-                "step_limit": [*self.indicator, float(self.updates)]
-                + ([self.estimate.k_crit, self.estimate.lambda_max] if self.estimate else [])}
+                "step_limit": [*self.indicator, float(self.updates), self.estimate.lambda_max]}
 
     def restore(self, state: dict) -> None:
         self.normal[:], self.tangent[:] = state["step_limit_normal"], state["step_limit_tangent"]
         numbers = list(state["step_limit"])
         self.indicator, self.updates = (numbers[0], numbers[1]), int(numbers[2])
-        if len(numbers) == 5:
-            self.estimate = Estimate(numbers[3], numbers[4], float(self.normal.max(initial=0.0)),
-                                     float(self.tangent.max(initial=0.0)),
-                                     (int(np.count_nonzero(self.normal)), int(np.count_nonzero(self.tangent)),
-                                      self.side.points))
+        self.estimate = self._described(numbers[3])
 
 
 def check(k: float, estimate: Estimate, bound: Estimate | None = None) -> None:

@@ -50,6 +50,7 @@ class ExplicitEuler(KelvinVoigtScheme):
         self.tangential = self.contact.tangential and d.side is not None and bool(d.side.T_tau)
         delta = d.model.loads.delta  # the rod's end moves in time: the velocity is lifted on the clamp
         self.v_clamp, self.limit = None, None
+        self._v_old = None  # (solver = 'cg': the velocity of the step before, for the first guess)
         if delta is not None and delta.depends_on("t"):
             self.v_clamp = d.u.vec.CreateVector()
             self.v_clamp.FV().NumPy()[:] = 0.0  # CreateVector does not initialise
@@ -113,6 +114,18 @@ class ExplicitEuler(KelvinVoigtScheme):
         self.checks["stability_override"] = 2
         warnings.warn(message + ": running on (allow_unstable)", RuntimeWarning, stacklevel=2)
 
+    def _first_guess(self, k: float) -> None:
+        """CG's warm start: v extrapolated linearly in time from the last two steps (the solve then starts from an
+        O(k^2) residual instead of O(k))."""
+        v = self.v_np
+        old, k_old = self._v_old, self.k_last
+        if old is None:
+            self._v_old = v.copy()
+            return
+        guess = v + (k / k_old) * (v - old) if k_old > 0 else v
+        old[:] = v
+        v[:] = guess
+
     def diagnostics(self) -> dict:
         """With solver = 'cg': the iterations of the last step's solve."""
         if self.solver.name != "cg":
@@ -120,11 +133,20 @@ class ExplicitEuler(KelvinVoigtScheme):
         return {"cg_iterations": self.solver.last_iterations if self.k_last else 0}  # (0 at the start)
 
     def _extra_state(self) -> dict:
-        return self.limit.state() if self.limit is not None else {}
+        out = {"cg_v_old": self._v_old.copy()} if self._v_old is not None else {}
+        if self.limit is None:
+            return out
+        c = self.checks
+        return out | self.limit.state() | {"step_checks": [c["k_crit_min"], float(c["k_crit_updates"]),
+                                                           float(c["stability_override"])]}
 
     def _restore_extra(self, extra: dict) -> None:
-        if extra and self.limit is not None:
+        self._v_old = extra["cg_v_old"].copy() if "cg_v_old" in extra else None
+        if "step_checks" in extra and self.limit is not None:
             self.limit.restore(extra)
+            k_min, updates, override = extra["step_checks"]
+            self.checks.update(k_crit_min=float(k_min), k_crit_updates=int(updates),
+                               stability_override=max(self.checks["stability_override"], int(override)))
 
     def warnings(self) -> list:
         return ([self._override] if getattr(self, "_override", None) else []) + super().warnings()
@@ -159,6 +181,8 @@ class ExplicitEuler(KelvinVoigtScheme):
             self.solver.solve(self.rhs_np, self.v_np)
             self.v_np += vc
         else:
+            if self.solver.name == "cg":
+                self._first_guess(k)
             self.solver.solve(self.rhs_np, self.v_np)
         u += k * self.v_np
         if self.bonding is not None:
