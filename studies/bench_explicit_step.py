@@ -42,7 +42,8 @@ def per_step(nx, steps, solver="auto", threads=None):
     solve, step = [], []
     t = 0.0
     with _threads(threads), blas_single_threaded():
-        sch.start(t)  # driven as the time loop drives it
+        sch.preflight(1e-4)  # driven as the time loop drives it (the preflight sets up the step-limit re-check)
+        sch.start(t)
         sch.accept(t)
         for _ in range(steps):
             a = time.perf_counter()

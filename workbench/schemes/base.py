@@ -102,6 +102,8 @@ class Scheme:
         return None if d.beta is None else d.beta.vec.FV().NumPy()[d.beta_dofs]
 
     def accept(self, t: float) -> None:
+        if not self.keep:  # (a scheme without error control or multistep formula keeps no history)
+            return
         beta = self._beta()
         u = self.d.u.vec.FV().NumPy()
         self.history.append((float(t), u.copy(), None if beta is None else beta.copy()))

@@ -34,6 +34,7 @@ class ExplicitEuler(KelvinVoigtScheme):
     name = "explicit"
     chatter_watch = True  # its unstable contact mode can bounce instead of alternating
     lag = 1.0  # sigma_n uses u_{n-1} = u_n - k v_n
+    keep = 0  # no error control, one step: no history of accepted states (a copy of u a step saved)
 
     def __init__(self, disc):
         super().__init__(disc)
