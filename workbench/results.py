@@ -349,8 +349,8 @@ def brief(value, head: int = 3, tail: int = 2) -> str:
     return repr(value.item() if isinstance(value, np.generic) else value)
 
 #: Units of the non-parameter attributes a run writes.
-ATTR_UNITS = {"h_max": "m", "k_actual": "s", "k_crit": "s", "k_crit_min": "s", "setup_time": "s", "wall_time": "s", "cpu_time": "s",
-              "ndof": "1", "nsteps": "1", "threads": "1", "memory_peak_mb": "MB"}
+ATTR_UNITS = {"h_max": "m", "k_actual": "s", "k_crit": "s", "k_crit_min": "s", "setup_time": "s", "wall_time": "s",
+              "cpu_time": "s", "ndof": "1", "nsteps": "1", "threads": "1", "memory_peak_mb": "MB"}
 
 
 def provenance(scene, extra: dict, call: str = "", terms=None) -> dict:

@@ -6,10 +6,11 @@ slab) the bandwidth is ~2 (ny + 1) and a back-substitution is 2–4x faster than
 NGSolve's ``sparsecholesky`` (measured in ``studies/bench_explicit_step.py``).
 ``sparsecholesky`` / ``umfpack``: NGSolve's own direct solvers.
 ``cg``: conjugate gradients preconditioned by smoothed-aggregation AMG (pyamg) with
-the rigid-body modes as near-null space, warm started from the previous solution,
+the rigid-body modes as near-null space, warm started from ``out`` (the explicit scheme puts its velocity
+extrapolated from the last two steps there),
 to a relative residual of :data:`CG_TOL`: no factor, so memory grows like the matrix
-(the P2 block at 271k dofs, a whole explicit run: 2.1 GB peak and 44 s setup against 5.1 GB and 115 s with
-NGSolve's sparse factor; 11.5 s a step against 2.1 s; `studies/bench_3d_solver.py`).
+(the P2 block at 271k dofs, a whole explicit run: 2.1 GB peak and 37 s setup against 5.1 GB and 115 s with
+NGSolve's sparse factor; 7.9 s a step against 2.1 s; `studies/bench_3d_solver.py`).
 Only for solves with one constant matrix (the explicit scheme): the implicit schemes
 condense on the contact dofs, one solve per contact dof.
 ``auto`` takes ``banded`` when the ordered bandwidth is small against the size, and,
