@@ -165,14 +165,14 @@ class AMGConjugateGradient:
 
 
 def rigid_body_modes(fes) -> np.ndarray:
-    """The rigid-body motions as dof vectors of the displacement space (ndof x 3 in 2D, 6 in 3D): the space
-    interpolates linear fields exactly, so these are exact (high-order dofs zero)."""
+    """The rigid-body motions as dof vectors of the displacement space (ndof x 1 on the rod, 3 in 2D, 6 in 3D): the
+    space interpolates linear fields exactly, so these are exact (high-order dofs zero)."""
     import ngsolve as ngs
 
     dim = fes.mesh.dim
     x, y, z = ngs.x, ngs.y, ngs.z
-    fields = ([(1, 0), (0, 1), (-y, x)] if dim == 2 else
-              [(1, 0, 0), (0, 1, 0), (0, 0, 1), (-y, x, 0), (0, -z, y), (z, 0, -x)])
+    fields = {1: [1.0], 2: [(1, 0), (0, 1), (-y, x)],
+              3: [(1, 0, 0), (0, 1, 0), (0, 0, 1), (-y, x, 0), (0, -z, y), (z, 0, -x)]}[dim]
     g = ngs.GridFunction(fes)
     out = np.empty((fes.ndof, len(fields)))
     for j, f in enumerate(fields):
