@@ -133,6 +133,7 @@ def test_divergence_stops_and_keeps(tmp_path):
                           capture_output=True, text=True)
     assert proc.returncode == 3 and "error:" in proc.stderr
     assert workbench.load(out).attrs["status"] == "incomplete"
+    assert " of 100 steps" in proc.stdout  # the steps it kept, of those planned (it said "100 steps")
     proc = subprocess.run([sys.executable, "-m", "workbench.cli", "run", "slab", "--h", "0.05", "--k", "0.01",
                            "--set", "c_nu=1e7", "--set", "traction_top=(0, -1)", "-o", str(tmp_path / "refused.nc")],
                           capture_output=True, text=True)

@@ -174,7 +174,10 @@ def cmd_show(args) -> int:
 
 def _status_line(ds) -> str:
     a = ds.attrs
-    return (f"{a['scene']}: {a['status']}, {a['nsteps']} steps of the {a['scheme']} scheme in {a['wall_time']:.3g} s "
+    steps = f"{a['nsteps']} steps"
+    if a["status"] == "incomplete" and "step" in ds.coords and ds.sizes.get("time", 0):
+        steps = f"{int(ds.step.values[-1])} of {a['nsteps']} steps"  # (the last step it kept, of those planned)
+    return (f"{a['scene']}: {a['status']}, {steps} of the {a['scheme']} scheme in {a['wall_time']:.3g} s "
             f"(setup {a['setup_time']:.3g} s), ndof {a['ndof']}")
 
 
