@@ -131,9 +131,10 @@ def test_springs_that_cannot_act_do_not_shorten_the_step():
 
 def test_a_run_whose_springs_grow_beyond_its_step_stops_with_what_it_computed():
     """tp5 (stiff foundation) at k = 0.002: after one step only part of the bottom is pressed in (the start's limit,
-    3.3e-3 s at k = 0.01), so the run starts; when the pressed part has grown so that the limit falls below k the
+    2.2e-3 s, measured), so the run starts; when the pressed part has grown so that the limit falls below k the
     run stops with a message naming the new limit and the ways out, keeping its steps; with allow_unstable it runs
-    on, says so and records it. Below the bound with every spring acting (6.97e-4) it completes."""
+    on, says so and records it. Below the bound with every spring acting (6.97e-4) it completes, and its limit is
+    never below that bound (the envelope of the acting springs is at most every spring)."""
     from workbench.errors import StepLimitExceeded
 
     with pytest.raises(StepLimitExceeded) as err:
