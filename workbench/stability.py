@@ -96,9 +96,7 @@ def critical_step(disc_or_scene, solver=None) -> Estimate:
     stiff.Assemble()
     free = np.nonzero(np.array(d.fes.FreeDofs(), dtype=bool))[0]
     K = solvers.to_scipy(stiff.mat)[free][:, free]
-    KA = getattr(solver, "K", None)
-    if KA is None:
-        KA = solvers.to_scipy(d.viscous.mat)[free][:, free]
+    KA = _viscous_on(d, free, solver)
     inv = solver or solvers.factor(d.viscous.mat, d.fes.FreeDofs(), d.u.vec,
                                    solvers.choose(d.scene["solver"], d.dim, d.ndof, iterative=True), fes=d.fes)
     full_in, full_out = np.zeros(d.ndof), np.zeros(d.ndof)
@@ -110,6 +108,12 @@ def critical_step(disc_or_scene, solver=None) -> Estimate:
 
     lam, _ = _largest_eigenvalue(K, KA, apply_inverse, np.ones(free.size), getattr(inv, "preconditioner", None))
     return Estimate(2.0 / lam, lam, s_nu, s_tau)
+
+
+def _viscous_on(d, free, solver):
+    """K_A on the free dofs: the iterative solver's own copy when it has one (the largest matrix of a 3D run)."""
+    KA = getattr(solver, "K", None)
+    return solvers.to_scipy(d.viscous.mat)[free][:, free] if KA is None else KA
 
 
 def _largest_eigenvalue(K, KA, apply_inverse, v0, preconditioner=None):
@@ -176,10 +180,7 @@ class StepLimit:
         self.side, self.contact, self.solver = d.side, d.model.contact, solver
         self.free = np.nonzero(np.array(d.fes.FreeDofs(), dtype=bool))[0]
         self.KG = solvers.to_scipy(d.elastic.mat)[self.free][:, self.free]
-        # (an iterative solver holds K_A on the same free dofs: shared, it is the largest matrix of a 3D run)
-        self.KA = getattr(solver, "K", None)
-        if self.KA is None:
-            self.KA = solvers.to_scipy(d.viscous.mat)[self.free][:, self.free]
+        self.KA = _viscous_on(d, self.free, solver)
         side = self.side
         self.T_nu = side.T_nu[:, self.free].tocsr()
         self.T_tau = [T[:, self.free].tocsr() for T in side.T_tau]
