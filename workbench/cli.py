@@ -426,5 +426,15 @@ def main(argv=None) -> int:
                 invocation.reset(token)
 
 
+def console() -> int:
+    """The ``workbench`` command, a process of its own: one that runs no sweep skips what it does not use
+    (:func:`workbench._lean_process`); ``study`` may send its cases to a dask cluster."""
+    if sys.argv[1:2] != ["study"]:
+        from . import _lean_process
+
+        _lean_process()
+    return main()
+
+
 if __name__ == "__main__":  # pragma: no cover
-    sys.exit(main())
+    sys.exit(console())

@@ -26,6 +26,9 @@ from __future__ import annotations
 
 import contextlib
 
+#: Set by :func:`workbench._lean_process` in a process of its own whose BLAS pools all started with one thread.
+POOLS_STARTED_SINGLE = False
+
 
 @contextlib.contextmanager
 def blas_single_threaded():
@@ -35,6 +38,9 @@ def blas_single_threaded():
     block starts, and one loaded later (in a process where NumPy came before workbench) would run
     with as many threads as cores.
     """
+    if POOLS_STARTED_SINGLE:  # (a process of its own whose pools all started with one thread)
+        yield
+        return
     import ngsolve  # noqa: F401
     import scipy.linalg  # noqa: F401
     from threadpoolctl import threadpool_limits

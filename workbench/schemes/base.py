@@ -399,9 +399,8 @@ class KelvinVoigtScheme(Scheme):
         beta = self._beta()
         p = m.contact.normal(NP, side.u_nu(u), None if beta is None else beta[side.element], side.gap0)
         pressure = np.zeros(len(d.node_dofs))
-        if p is not None:  # (u_nu = sign u_normal: the nodal force in u_nu's direction is sign * that dof's entry)
-            force = side.integrate(p)
-            pressure = g.normal_sign * force[d.normal_dofs] / d.node_weights
+        if p is not None:
+            pressure = d.nodal_pressure(p)
         pinned = d.pinned_nodes
         if pinned.size and t is not None:
             f, internal = d.u.vec.CreateVector(), d.u.vec.CreateVector()

@@ -14,6 +14,7 @@ from __future__ import annotations
 
 import collections
 import math
+import sys
 
 import numpy as np
 
@@ -421,8 +422,6 @@ def march(disc, scheme, steps, recorder, *, progress=None, limit=None, limit_ori
     record. ``after_step(t, n)`` is called after each accepted step is recorded, ``n``
     counting the steps from the run's start (the runner writes its checkpoints there).
     """
-    from tqdm.auto import tqdm
-
     from ..errors import NewtonFailed
 
     u_np = disc.u.vec.FV().NumPy()
@@ -439,8 +438,8 @@ def march(disc, scheme, steps, recorder, *, progress=None, limit=None, limit_ori
     watch = OscillationWatch(disc.v.vec.FV().NumPy(), [None] + ([disc.normal_dofs] if disc.dim > 1 else []))
     chatter = ChatterWatch(lambda: disc.normal_displacement(u_np)) if scheme.chatter_watch else None
     n = steps.taken
-    bar = tqdm(total=steps.n_steps, initial=n, disable=None if progress is None else not progress, unit="step",
-               mininterval=0.5, leave=False, desc=disc.scene.name)
+    bar = _progress_bar(progress, total=steps.n_steps, initial=n, unit="step", mininterval=0.5, leave=False,
+                        desc=disc.scene.name)
     try:
         while not steps.done():
             t_prev, t = steps.next()
@@ -488,6 +487,24 @@ def march(disc, scheme, steps, recorder, *, progress=None, limit=None, limit_ori
             bar.update()
     finally:
         bar.close()
+
+
+class _NoBar:
+    def update(self, n=1):
+        pass
+
+    def close(self):
+        pass
+
+
+def _progress_bar(progress, **options):
+    """tqdm's bar when one is shown (``progress``, or None: on a terminal), else a stand-in: tqdm's import (30 ms,
+    with its monitor thread) is not paid by runs that show none."""
+    if not (sys.stderr.isatty() if progress is None else progress):
+        return _NoBar()
+    from tqdm.auto import tqdm
+
+    return tqdm(**options)
 
 
 def _control(steps, k, err) -> dict:

@@ -41,6 +41,9 @@ def main() -> None:
     channel = os.fdopen(os.dup(1), "wb")
     os.dup2(2, 1)  # prints inside a run go to stderr, never into the channel
     stdin = sys.stdin.buffer
+    from .. import _lean_process
+
+    _lean_process()
     from .execute import read_frame, run_case, write_frame
 
     while True:
