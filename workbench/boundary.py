@@ -89,7 +89,7 @@ class ContactSide:
             form = ngs.BilinearForm(trialspace=fes, testspace=irs)
             form += u[c] * v * ngs.ds(name, intrules=rules)
             form.Assemble()
-            rows, cols, vals = form.mat.COO()
+            rows, cols, vals = form.mat.local_mat.COO()  # (several MPI processes: this rank's facets)
             M = sp.csr_matrix((np.asarray(vals), (np.asarray(rows), np.asarray(cols))), shape=(irs.ndof, fes.ndof))
             traces.append((sp.diags(1.0 / w[points]) @ M[points]).tocsr())  # M = diag(w) T
         self.weights = w[points]

@@ -18,6 +18,7 @@ message says where). Warnings are printed as one line ``warning: ...`` each.
 from __future__ import annotations
 
 import argparse
+import os
 import sys
 import warnings
 
@@ -196,8 +197,12 @@ def cmd_run(args) -> int:
                  progress=False if args.no_progress else None, threads=_threads(args.threads), **overrides)
         code = 0
     except Diverged as err:
+        if err.dataset is None:  # (several MPI processes: rank 0 has the result and says it)
+            return EXIT_DIVERGED
         print(_one_line(f"error: {err}"), file=sys.stderr)
         ds, code = err.dataset, EXIT_DIVERGED
+    if ds is None:  # (several MPI processes: rank 0 holds the result and writes it)
+        return code
     print(_status_line(ds))
     kept = None
     if args.output:
@@ -400,22 +405,25 @@ def main(argv=None) -> int:
 
     argv = sys.argv[1:] if argv is None else list(argv)
     token = None
+    stdout = sys.stdout
     with warnings.catch_warnings():
         warnings.simplefilter("default", RuntimeWarning)
         warnings.showwarning = _show_warning
         try:
+            if _other_rank():  # (several MPI processes: rank 0 speaks for all; the others say nothing)
+                sys.stdout = open(os.devnull, "w")
+                warnings.simplefilter("ignore")
             args = build_parser().parse_args(argv)
             token = invocation.set(shlex.join(["workbench"] + argv))
             return args.func(args)
         except ParameterError as err:
-            print(_one_line(f"error: {err}"), file=sys.stderr)
+            if sys.stdout is stdout:
+                print(_one_line(f"error: {err}"), file=sys.stderr)
             return EXIT_BAD_INPUT
         except KeyboardInterrupt:
             print("error: interrupted", file=sys.stderr)
             return 130
         except BrokenPipeError:  # the reader left (`workbench show tp5 | head`): stop quietly, as Unix tools do
-            import os
-
             try:
                 os.dup2(os.open(os.devnull, os.O_WRONLY), sys.stdout.fileno())
             except OSError:
@@ -424,6 +432,16 @@ def main(argv=None) -> int:
         finally:  # main() called in a session (a notebook, a test): later library calls are not this command
             if token is not None:
                 invocation.reset(token)
+            if sys.stdout is not stdout:
+                sys.stdout.close()
+                sys.stdout = stdout
+
+
+def _other_rank() -> bool:
+    """Whether this process is one of several MPI ranks of a distributed run, and not rank 0 (:mod:`.parallel`)."""
+    from .parallel import world
+
+    return not world().root
 
 
 def console() -> int:

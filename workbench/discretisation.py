@@ -26,18 +26,23 @@ from functools import cached_property
 import ngsolve as ngs
 import numpy as np
 
+from . import parallel
 from .boundary import ContactSide
+from .parallel import SERIAL
 from .physics import kelvin_voigt
 from .physics.ops import NGS
 
 
-def stiffness(fes, tensor, dim: int) -> ngs.BilinearForm:
-    """The assembled form (tensor eps(u), eps(w)): K_A, K_G or a relaxation stiffness."""
+def stiffness(fes, tensor, dim: int, preconditioner: str | None = None) -> ngs.BilinearForm:
+    """The assembled form (tensor eps(u), eps(w)): K_A, K_G or a relaxation stiffness; with ``preconditioner`` (e.g.
+    "bddc"), (the form, NGSolve's preconditioner of that name, registered before the assembly as it must be)."""
     u, w = fes.TnT()
     form = ngs.BilinearForm(fes, symmetric=True)
     form += kelvin_voigt.energy_product(tensor, u, w, dim) * ngs.dx
-    form.Assemble()
-    return form
+    if preconditioner is None:
+        return form.Assemble()
+    pre = ngs.Preconditioner(form, preconditioner)
+    return form.Assemble(), pre
 
 
 class Discretisation:
@@ -69,14 +74,16 @@ class Discretisation:
         Model B: w_i = int_Gamma3 phi_i da at the contact vertices.
     """
 
-    def __init__(self, model, scene, mesh, fes):
+    def __init__(self, model, scene, mesh, fes, world=SERIAL):
         self.model, self.scene, self.geometry = model, scene, model.geometry
+        self.world = world  # (several MPI processes: this rank's part of the body, workbench.parallel)
+        self.shell = None  # (several processes, on rank 0: the serial view that records, workbench.parallel.Shell)
         self.mesh, self.fes = mesh, fes
         self.dim = self.geometry.dim
         self.contact_name = self.geometry.boundaries["contact"]
         self.t = ngs.Parameter(0.0)
         self.u, self.v = ngs.GridFunction(fes, "u"), ngs.GridFunction(fes, "velocity")
-        self.viscous = self.elastic = None
+        self.viscous = self.elastic = self.viscous_pre = None
         self.side = self.rate_side = self.beta = None
         self.beta_dofs = self.facet_measure = self.facet_xyz = None
         self.memory, self.memory_kind, self.contact_weights = [], "none", None
@@ -92,7 +99,7 @@ class Discretisation:
         """Vertex/contact-node dof tables, Dirichlet dofs and probe points."""
         mesh, fes, dim = self.mesh, self.fes, self.dim
         ngmesh = mesh.ngmesh  # keep the wrapper alive: Coordinates() is a view into it
-        coords = np.array(ngmesh.Coordinates())[:, :dim]
+        coords = np.array(ngmesh.Coordinates()).reshape(mesh.nv, ngmesh.dim)[:, :dim]  # (MPI's rank 0: no vertices)
         self.vertex_xyz = coords
         self.vertex_dofs = _vertex_dofs(fes, dim, mesh.nv)
         nodes = _boundary_vertices(mesh, self.contact_name)
@@ -310,6 +317,8 @@ def _vertex_dofs(fes, dim, nv):
     """dof of (vertex i, component c): vertex dofs come first in each component block."""
     per_comp = fes.ndof // dim
     table = np.arange(nv)[:, None] + per_comp * np.arange(dim)[None, :]
+    if nv == 0:  # (MPI's rank 0 holds no part of the body)
+        return table
     probe = list(fes.GetDofNrs(ngs.NodeId(ngs.VERTEX, nv - 1)))
     assert probe == list(table[-1]), "unexpected dof numbering in the displacement space"
     return table
@@ -362,12 +371,18 @@ class Loads:
         if n_fixed:
             fixed.Assemble()
             self.fixed = fixed.vec.FV().NumPy().copy()
-        self.point_dofs, self.point_force = None, loads.point_force
-        if dim > 1 and loads.point_force is not None and not loads.point_force.is_zero():
+        self.point_dofs, self.point_force, self.point_vertex = None, loads.point_force, None
+        self.vertex_dofs = vertex_dofs
+        if dim > 1 and loads.point_force is not None and not loads.point_force.is_zero() and len(vertex_xyz):
             at = np.asarray(loads.point_force_at[0])
-            nearest = int(np.argmin(np.sum((vertex_xyz - at) ** 2, axis=1)))
-            self.point_dofs = vertex_dofs[nearest]
+            self.relocate_point_force(int(np.argmin(np.sum((vertex_xyz - at) ** 2, axis=1))))
         self._values = {}
+
+    def relocate_point_force(self, vertex) -> None:
+        """Apply the point force at the vertex ``vertex`` (None: not here; on several MPI processes it is added once,
+        by the rank that owns the serial run's vertex)."""
+        self.point_vertex = vertex
+        self.point_dofs = None if vertex is None else self.vertex_dofs[vertex]
 
     def vector(self, time: float, out) -> None:
         """out = F(time) (an NGSolve vector, overwritten)."""
@@ -438,20 +453,38 @@ def build(model_or_scene, scene=None) -> Discretisation:
     else:
         model = model_or_scene
     geometry = model.geometry
-    mesh = geometry.mesh()
+    w = parallel.world()
+    if w.parallel:  # this rank's part of the body; rank 0 keeps the serial mesh for its shell
+        mesh, serial_mesh = parallel.distribute(geometry)
+    else:
+        mesh = geometry.mesh()
     fes = _vector_space(geometry, mesh, scene["order"])
-    d = Discretisation(model, scene, mesh, fes)
+    d = Discretisation(model, scene, mesh, fes, w)
     if model.kind == "B":
         _memory_parts(d)
     else:
         _kelvin_voigt_parts(d)
+    if w.parallel:
+        d.shell = parallel.Shell(d, serial_mesh)
     return d
 
 
-def _kelvin_voigt_parts(d: Discretisation) -> None:
+def serial_shell(model, scene, mesh) -> Discretisation:
+    """The tables of a discretisation on the serial ``mesh`` without its matrices: what rank 0 of a distributed run
+    records through (:class:`workbench.parallel.Shell`)."""
+    d = Discretisation(model, scene, mesh, _vector_space(model.geometry, mesh, scene["order"]))
+    _kelvin_voigt_parts(d, matrices=False)
+    return d
+
+
+def _kelvin_voigt_parts(d: Discretisation, matrices: bool = True) -> None:
     m = d.model
-    d.viscous = stiffness(d.fes, m.viscous, d.dim)
-    d.elastic = stiffness(d.fes, m.elastic, d.dim)
+    if matrices:  # (several processes: K_A with the BDDC preconditioner of the conjugate gradients)
+        if d.world.parallel and d.scene["solver"] in ("auto", "cg"):
+            d.viscous, d.viscous_pre = stiffness(d.fes, m.viscous, d.dim, "bddc")
+        else:
+            d.viscous = stiffness(d.fes, m.viscous, d.dim)
+        d.elastic = stiffness(d.fes, m.elastic, d.dim)
     if m.contact or m.bonding is not None:
         d.side = ContactSide(d.fes, d.contact_name, d.geometry, rule=d.scene["order"])
     if m.bonding is not None:

@@ -159,8 +159,8 @@ def _points(name, value):
 
 
 def _times(name, value):
-    if isinstance(value, str):
-        value = [v for v in value.replace(";", ",").split(",") if v.strip()]
+    if isinstance(value, str):  # "0.1, 0.2", or as `workbench show` prints a list: "[0.1, 0.2]"
+        value = [v for v in value.strip().strip("[]()").replace(";", ",").split(",") if v.strip()]
     try:
         ts = tuple(float(v) for v in (value if hasattr(value, "__iter__") else [value]))
     except (TypeError, ValueError):

@@ -168,9 +168,18 @@ class Recorder:
     def record(self, t: float, scheme, final: bool = False, control=None) -> None:
         """Offer the state at time t (the loop calls this after every step and after ``start``); ``control``:
         scalars of the step controller (an adaptive run's step size and error estimate)."""
+        self.take(t, scheme, *self.due(t, final), control=control)
+
+    def due(self, t: float, final: bool = False) -> tuple:
+        """(whether the state at t is recorded, whether its whole field is kept): the schedule, advanced by the offer
+        of time t (a distributed run gathers the state to rank 0 only then, :mod:`workbench.parallel`)."""
         self.step += 1
+        return self._wanted(t, final), any(abs(t - s) <= self.tol for s in self.snapshot_times)
+
+    def take(self, t: float, scheme, wanted: bool, snapshot: bool, control=None) -> None:
+        """Record the state at t as :meth:`due` said."""
         d = self.disc
-        if self._wanted(t, final):
+        if wanted:
             self.last = t
             self.times.append(t)
             self.steps.append(self.step)
@@ -191,7 +200,7 @@ class Recorder:
             assert all(len(v) == i + 1 for v in self.extra.values()), "diagnostics must be given at every record"
             if self.every_step and len(self.times) > self.max_records:
                 self._decimate()
-        if any(abs(t - s) <= self.tol for s in self.snapshot_times):
+        if snapshot:
             self.snapshot(t, scheme)
 
     def state(self) -> dict:

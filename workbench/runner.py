@@ -13,7 +13,7 @@ import warnings
 
 import numpy as np
 
-from . import discretisation, preflight, results, scenes
+from . import discretisation, parallel, preflight, results, scenes
 from .errors import Diverged, ParameterError
 from .parameters import closest_name
 from .schemes import scheme_class
@@ -120,7 +120,9 @@ def run(scene=None, *, restart=None, checkpoint=None, progress=None, record_time
     if resume is not None and not sc.values.get("rtol", 0) > 0:
         restarts.check_grid(restart, grid, resume[1], resume[0])
     model = model or sc.model_of()
-    preflight.resources(sc, model, len(grid) - 1)
+    parallel.check(sc, model, restart=restart, checkpoint=checkpoint)
+    if not parallel.world().parallel:  # (several MPI processes: each holds its part, the serial estimate does not apply)
+        preflight.resources(sc, model, len(grid) - 1)
     given = [] if scene is None else [repr(scene if isinstance(scene, str) else getattr(scene, "name", scene))]
     given += [f"{k}={results.brief(v)}" for k, v in (("restart", restart), ("checkpoint", checkpoint))
               if v is not None]
@@ -151,8 +153,16 @@ def _run(sc, model, grid, record_times, progress, limit, threads, call, resume=N
     # (an error-controlled run resolves debonding by its own steps: the fixed-step resolution warning is moot)
     for message in preflight.warnings_for(sc, model) + ([] if adaptive else scheme.warnings()):
         warnings.warn(message, RuntimeWarning, stacklevel=3)
-    recorder = results.Recorder(disc, sc["T"], sc["snapshots"], record_times,
-                                MAX_RECORDS_ADAPTIVE if adaptive else MAX_RECORDS, every_step=adaptive)
+    world = disc.world
+    if world.parallel:  # rank 0 records the serial shell, the ranks send their parts
+        serial = disc.shell.disc
+        recorder = parallel.GatheringRecorder(disc.shell, results.Recorder(serial, sc["T"], sc["snapshots"],
+                                                                           record_times, MAX_RECORDS)
+                                              if world.root else None)
+    else:
+        serial = disc
+        recorder = results.Recorder(disc, sc["T"], sc["snapshots"], record_times,
+                                    MAX_RECORDS_ADAPTIVE if adaptive else MAX_RECORDS, every_step=adaptive)
     if resume is not None:
         restarts.restore(resume[1], disc, scheme, steps, recorder, resume[0])
     if limit is None:
@@ -172,7 +182,7 @@ def _run(sc, model, grid, record_times, progress, limit, threads, call, resume=N
             control = {"k_actual": steps.k_max, "nsteps": steps.taken if status == "checkpoint" else steps.n_steps}
         extra = {
             "scheme": scheme.name, "h_max": g.h_max(), "cells": "x".join(map(str, g.cells())),
-            **control, "ndof": disc.ndof, "threads": threads or 1,
+            **control, "ndof": serial.ndof, "threads": threads or 1, "mpi_processes": world.size,
             "setup_time": setup.wall, "wall_time": wall, "cpu_time": cpu, "status": status,
             "failure": "" if failure is None else str(failure),
             "failure_type": "" if failure is None else type(failure).__name__,
@@ -206,8 +216,12 @@ def _run(sc, model, grid, record_times, progress, limit, threads, call, resume=N
                   resume=resume is not None, after_step=after_step)
         except Diverged as err:
             failure = err
-    ds = recorder.dataset(attrs("complete" if failure is None else "incomplete", failure, clock.wall, clock.cpu))
+    ds = None  # (several MPI processes: rank 0 holds the records)
+    if world.root:
+        ds = recorder.dataset(attrs("complete" if failure is None else "incomplete", failure, clock.wall, clock.cpu))
     if failure is not None:
         failure.dataset = ds
         raise failure
+    if world.parallel:  # (rank 0's Dataset, None elsewhere; no restart state: restarts run with one process)
+        return ds
     return restarts.attach(ds, restarts.capture(scheme, steps, recorder))

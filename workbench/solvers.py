@@ -164,6 +164,47 @@ class AMGConjugateGradient:
         return X
 
 
+class DistributedSolver:
+    """K_A of a body distributed over MPI processes (:mod:`workbench.parallel`): NGSolve's conjugate gradients
+    preconditioned by ``pre`` (BDDC; ``method = 'cg'``) to a relative residual of :data:`CG_TOL` (in the
+    preconditioner's norm, NGSolve's), or NGSolve's sparse Cholesky factor, which gathers the matrix on rank 0
+    (``'sparsecholesky'``). ``solve(rhs, out)`` takes this rank's part of the right-hand side (a distributed
+    vector) and gives the solution cumulated (every copy of a shared dof holds its value), zero on the Dirichlet
+    dofs."""
+
+    def __init__(self, mat, pre, freedofs, vector, method: str):
+        self.name = method
+        self.fixed = np.nonzero(~np.array(freedofs, dtype=bool))[0]
+        if method == "cg":
+            from ngsolve.krylovspace import CGSolver
+
+            self.inv = CGSolver(mat, pre.mat, tol=CG_TOL, maxiter=CG_MAXITER)
+        else:
+            self.inv = mat.Inverse(freedofs, inverse="sparsecholesky")
+        self.b, self.x = vector.CreateVector(), vector.CreateVector()
+        self.last_iterations = 0
+
+    def solve(self, rhs: np.ndarray, out: np.ndarray) -> None:
+        from .parallel import status
+
+        b = self.b.FV().NumPy()
+        b[:] = rhs
+        b[self.fixed] = 0.0
+        status(self.b, distributed=True)
+        if self.name != "cg":
+            self.x.data = self.inv * self.b
+        else:
+            self.inv.Solve(rhs=self.b, sol=self.x)
+            self.last_iterations = self.inv.iterations
+            if self.inv.residuals and self.inv.residuals[-1] > self.inv._final_residual:
+                from .errors import Diverged
+
+                raise Diverged(f"the conjugate gradient solve (solver = 'cg', BDDC, on several processes) did not "
+                               f"converge in {CG_MAXITER} iterations: residual {self.inv.residuals[-1]:.3g} against "
+                               f"{self.inv._final_residual:.3g}")
+        out[:] = self.x.FV().NumPy()
+
+
 def rigid_body_modes(fes) -> np.ndarray:
     """The rigid-body motions as dof vectors of the displacement space (ndof x 1 on the rod, 3 in 2D, 6 in 3D): the
     space interpolates linear fields exactly, so these are exact (high-order dofs zero)."""
@@ -199,6 +240,8 @@ BAND_BYTES = 1.0e9
 FACTOR_BYTES = 2.0e9
 #: Relative residual ||b - K x|| / ||b|| at which ``cg`` stops.
 CG_TOL = 1e-10
+#: The most iterations a conjugate gradient solve on several processes may take (BDDC: 2-10 on the boxes).
+CG_MAXITER = 500
 
 
 def sparse_factor_bytes(dim: int, ndof: int) -> float:

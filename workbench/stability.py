@@ -83,6 +83,10 @@ def critical_step(disc_or_scene, solver=None) -> Estimate:
     d = discretisation.build(disc_or_scene) if isinstance(disc_or_scene, Scene) else disc_or_scene
     model = d.model
     s_nu, s_tau = model.contact.max_slope(model.beta0)
+    if d.world.parallel:  # (several MPI processes: the springs at the contact points, Lanczos over the ranks)
+        w = d.side.weights if d.side is not None else np.zeros(0)
+        lam, _ = DistributedOperators(d, solver).largest_eigenvalue(s_nu * w, s_tau * w)
+        return Estimate(2.0 / lam, lam, s_nu, s_tau)
     u, w = d.fes.TnT()
     stiff = ngs.BilinearForm(d.fes, symmetric=True)
     stiff += kelvin_voigt.energy_product(model.elastic, u, w, d.dim) * ngs.dx
@@ -178,16 +182,22 @@ class StepLimit:
     def __init__(self, disc, solver):
         d = self.d = disc
         self.side, self.contact, self.solver = d.side, d.model.contact, solver
+        self.world = d.world
         self.free = np.nonzero(np.array(d.fes.FreeDofs(), dtype=bool))[0]
-        self.KG = solvers.to_scipy(d.elastic.mat)[self.free][:, self.free]
-        self.KA = _viscous_on(d, self.free, solver)
         side = self.side
-        self.T_nu = side.T_nu[:, self.free].tocsr()
-        self.T_tau = [T[:, self.free].tocsr() for T in side.T_tau]
+        if self.world.parallel:  # this rank's part: its facets' traces on all its dofs, the diagonals summed over ranks
+            self.distributed = DistributedOperators(d, solver)
+            self.T_nu, self.T_tau = side.T_nu, side.T_tau
+            self.diag_KG, self.diag_KA = self.distributed.diagonals(self.free)
+        else:
+            self.KG = solvers.to_scipy(d.elastic.mat)[self.free][:, self.free]
+            self.KA = _viscous_on(d, self.free, solver)
+            self.T_nu = side.T_nu[:, self.free].tocsr()
+            self.T_tau = [T[:, self.free].tocsr() for T in side.T_tau]
+            self.diag_KG, self.diag_KA = self.KG.diagonal(), self.KA.diagonal()
         # (T^2)^T (w s) is the diagonal of T^T diag(w s) T: the indicator costs one sparse product
         self.sq_nu = self.T_nu.multiply(self.T_nu).T.tocsr()
         self.sq_tau = sum((T.multiply(T).T.tocsr() for T in self.T_tau), sp.csr_matrix(self.sq_nu.shape))
-        self.diag_KG, self.diag_KA = self.KG.diagonal(), self.KA.diagonal()
         self.tangential = self.contact.tangential and bool(side.T_tau)
         self.normal = np.zeros(side.points)
         self.tangent = np.zeros(side.points)
@@ -210,7 +220,7 @@ class StepLimit:
         """Whether a state's springs exceed the envelope somewhere (the per-step test, with :meth:`slopes` about 40 us
         at 160 points; every step, since an unstable contact mode alternates from step to step and a sparser check
         can see the same phase only: measured on tp4)."""
-        return bool(np.any(s_nu > self.normal) or (s_tau is not None and np.any(s_tau > self.tangent)))
+        return self.world.any(np.any(s_nu > self.normal) or (s_tau is not None and np.any(s_tau > self.tangent)))
 
     def absorb(self, s_nu, s_tau) -> bool:
         """Take a state's springs into the envelope; True when lambda_max must be estimated again."""
@@ -223,13 +233,19 @@ class StepLimit:
 
     def _indicator(self) -> tuple:
         """(int s_nu + s_tau da, max_i (K_G + D)_ii / (K_A)_ii) of the envelope."""
-        w = self.side.weights
-        diag = self.diag_KG + self.sq_nu @ (w * self.normal) + self.sq_tau @ (w * self.tangent)
-        return float(w @ (self.normal + self.tangent)), float(np.max(diag / self.diag_KA))
+        w, world = self.side.weights, self.world
+        springs = self.sq_nu @ (w * self.normal) + self.sq_tau @ (w * self.tangent)
+        if world.parallel:  # (a shared dof's spring is summed over the ranks whose facets touch it)
+            springs = self.distributed.cumulated(springs)[self.free]
+        ratio = (self.diag_KG + springs) / self.diag_KA
+        return world.sum(w @ (self.normal + self.tangent)), world.max(np.max(ratio, initial=0.0))
 
     def estimate_now(self) -> Estimate:
         """lambda_max for the envelope (warm started from the last eigenvector)."""
         w = self.side.weights
+        if self.world.parallel:
+            lam, self._vector = self.distributed.largest_eigenvalue(w * self.normal, w * self.tangent, self._vector)
+            return self._estimated(lam)
         K = self.KG + self.T_nu.T @ sp.diags(w * self.normal) @ self.T_nu
         for T in self.T_tau:
             K = K + T.T @ sp.diags(w * self.tangent) @ T
@@ -243,6 +259,9 @@ class StepLimit:
         v0 = self._vector if self._vector is not None else np.ones(free.size)
         lam, self._vector = _largest_eigenvalue(K.tocsr(), self.KA, apply_inverse, v0,
                                                 getattr(self.solver, "preconditioner", None))
+        return self._estimated(lam)
+
+    def _estimated(self, lam: float) -> Estimate:
         self.indicator = self._indicator()
         self.updates += 1
         self.estimate = self._described(lam)
@@ -250,9 +269,11 @@ class StepLimit:
 
     def _described(self, lam: float) -> Estimate:
         """The estimate lambda_max = ``lam`` of the envelope, with its largest springs and where they act."""
-        acting = (int(np.count_nonzero(self.normal)), int(np.count_nonzero(self.tangent)), self.side.points)
-        return Estimate(2.0 / lam, lam, float(self.normal.max(initial=0.0)), float(self.tangent.max(initial=0.0)),
-                        acting)
+        world = self.world
+        acting = tuple(int(world.sum(n)) for n in (np.count_nonzero(self.normal), np.count_nonzero(self.tangent),
+                                                   self.side.points))
+        return Estimate(2.0 / lam, lam, world.max(self.normal.max(initial=0.0)),
+                        world.max(self.tangent.max(initial=0.0)), acting)
 
     def state(self) -> dict:
         """The envelope and the last estimate, as copies (a restart goes on with them)."""
@@ -264,6 +285,117 @@ class StepLimit:
         numbers = list(state["step_limit"])
         self.indicator, self.updates = (numbers[0], numbers[1]), int(numbers[2])
         self.estimate = self._described(numbers[3])
+
+
+class DistributedOperators:
+    """K_G, K_A, its solve and the springs T^T diag(w s) T of a body distributed over MPI processes
+    (:mod:`workbench.parallel`), applied to this rank's parts of dof vectors: for the step limit's Lanczos
+    (:func:`lanczos_largest`) and its diagonals. Vectors x that are multiplied are cumulated; products K x are
+    distributed (each rank its part of the sum); inner products of one of each are summed over the ranks."""
+
+    def __init__(self, d, solver):
+        self.d, self.solver, self.world = d, solver, d.world
+        self.x, self.y = d.u.vec.CreateVector(), d.u.vec.CreateVector()
+        self.fixed = np.nonzero(~np.array(d.fes.FreeDofs(), dtype=bool))[0]
+
+    def cumulated(self, values: np.ndarray) -> np.ndarray:
+        from .parallel import cumulate
+
+        return cumulate(self.y, values)
+
+    def diagonals(self, free):
+        """The diagonals of K_G and K_A on the free dofs (each rank's matrix holds its part of a shared dof's)."""
+        d = self.d
+        return tuple(self.cumulated(solvers.to_scipy(m.local_mat).diagonal())[free]
+                     for m in (d.elastic.mat, d.viscous.mat))
+
+    def _apply(self, mat, x: np.ndarray) -> np.ndarray:
+        from .parallel import status
+
+        self.x.FV().NumPy()[:] = x
+        status(self.x, distributed=False)
+        self.y.data = mat * self.x
+        out = self.y.FV().NumPy().copy()
+        out[self.fixed] = 0.0
+        return out
+
+    def largest_eigenvalue(self, ws_nu, ws_tau, v0=None):
+        """(lambda_max of (K_G + T^T diag(w s) T) x = lambda K_A x, its eigenvector): ``ws_nu``, ``ws_tau`` are the
+        weighted springs at this rank's contact points."""
+        d, side = self.d, self.d.side
+
+        def apply_K(x):
+            y = self._apply(d.elastic.mat, x)
+            if side is not None:
+                y += side.T_nu_t @ (ws_nu * (side.T_nu @ x))
+                for T, Tt in zip(side.T_tau, side.T_tau_t):
+                    y += Tt @ (ws_tau * (T @ x))
+            y[self.fixed] = 0.0
+            return y
+
+        def solve(y):
+            out = np.zeros_like(y)
+            self.solver.solve(y, out)
+            return out
+
+        if v0 is None:  # (the same start on every rank: a shared dof's copies must agree)
+            v0 = np.ones(d.ndof)
+            v0[self.fixed] = 0.0
+        return lanczos_largest(apply_K, lambda x: self._apply(d.viscous.mat, x), solve,
+                               lambda x, y: self.world.sum(x @ y), v0)
+
+
+def lanczos_largest(apply_K, apply_KA, solve, inner, v0, tol: float = 1e-8, steps: int = 300):
+    """(lambda_max, its eigenvector) of K x = lambda K_A x (K symmetric, K_A SPD) by Lanczos on K_A^-1 K, which is
+    self-adjoint in the K_A inner product, with full reorthogonalisation: one solve and two products a step, stopped
+    when the largest Ritz value changes by less than ``tol`` relative. ``inner(x, y)``: x^T y for x a vector and y a
+    product (on several processes: summed over the ranks); ``v0``: the start.
+
+    >>> import numpy as np
+    >>> K, KA = np.diag([1.0, 4.0, 2.0]), np.diag([1.0, 2.0, 4.0])
+    >>> lam, _ = lanczos_largest(lambda x: K @ x, lambda x: KA @ x, lambda y: np.linalg.solve(KA, y),
+    ...                          lambda x, y: x @ y, np.ones(3))
+    >>> round(lam, 12)
+    2.0
+    """
+    r = np.asarray(v0, dtype=float).copy()
+    p = apply_KA(r)
+    beta = np.sqrt(max(inner(r, p), 0.0))
+    if not beta > 0:
+        raise ParameterError("the explicit scheme's step limit k_crit cannot be estimated: the start vector of the "
+                             "eigenvalue iteration vanishes on the free dofs")
+    basis, products, alphas, betas = [], [], [], []
+    theta_old, vector = np.inf, None
+    for j in range(steps):
+        q, pq = r / beta, p / beta
+        basis.append(q)
+        products.append(pq)
+        Kq = apply_K(q)
+        alpha = inner(q, Kq)
+        alphas.append(alpha)
+        r = solve(Kq)
+        for _ in range(2):  # full reorthogonalisation in the K_A inner product (twice is enough)
+            for qi, pi in zip(basis, products):
+                r -= inner(r, pi) * qi
+        p = apply_KA(r)
+        beta = np.sqrt(max(inner(r, p), 0.0))
+        T = np.diag(alphas) + np.diag(betas, 1) + np.diag(betas, -1)
+        values, vectors = np.linalg.eigh(T)
+        theta = float(values[-1])
+        # (decided on reduced numbers only: on several processes every rank stops at the same step)
+        if (j > 0 and abs(theta - theta_old) <= tol * abs(theta)) or beta <= 1e-14 * abs(theta):
+            vector = sum(c * b for c, b in zip(vectors[:, -1], basis))
+            break
+        theta_old = theta
+        betas.append(beta)
+    else:
+        raise ParameterError(f"the explicit scheme's step limit k_crit cannot be estimated for these values (Lanczos "
+                             f"did not settle in {steps} steps); check the moduli (E, a1, a2, c_nu, gamma_nu) or use "
+                             "scheme = 'implicit'")
+    if not np.isfinite(theta) or theta <= 0:
+        raise ParameterError(f"the explicit scheme's step limit k_crit is not finite for these values (lambda_max = "
+                             f"{theta:.3g}); check the moduli (E, a1, a2, c_nu, gamma_nu) or use scheme = 'implicit'")
+    return theta, vector
 
 
 def check(k: float, estimate: Estimate, bound: Estimate | None = None) -> None:

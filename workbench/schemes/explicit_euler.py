@@ -39,8 +39,12 @@ class ExplicitEuler(KelvinVoigtScheme):
     def __init__(self, disc):
         super().__init__(disc)
         d = self.d
-        method = solvers.choose(d.scene["solver"], d.dim, d.ndof, iterative=True)
-        self.solver = solvers.factor(d.viscous.mat, d.fes.FreeDofs(), d.u.vec, method, fes=d.fes)
+        if d.world.parallel:  # (several MPI processes: BDDC-preconditioned CG, or the factor gathered on rank 0)
+            method = "sparsecholesky" if d.scene["solver"] == "sparsecholesky" else "cg"
+            self.solver = solvers.DistributedSolver(d.viscous.mat, d.viscous_pre, d.fes.FreeDofs(), d.u.vec, method)
+        else:
+            method = solvers.choose(d.scene["solver"], d.dim, d.ndof, iterative=True)
+            self.solver = solvers.factor(d.viscous.mat, d.fes.FreeDofs(), d.u.vec, method, fes=d.fes)
         self.rhs = d.u.vec.CreateVector()
         self.rhs_np, self.v_np, self.u_np = self.rhs.FV().NumPy(), d.v.vec.FV().NumPy(), d.u.vec.FV().NumPy()
         self.work = d.u.vec.CreateVector()

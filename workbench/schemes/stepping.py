@@ -19,6 +19,7 @@ import sys
 import numpy as np
 
 from ..errors import Diverged
+from ..parallel import SERIAL
 
 
 def time_grid(T: float, k: float, times=None, sync=()) -> np.ndarray:
@@ -338,8 +339,11 @@ class OscillationWatch:
     previous velocities in preallocated buffers (no copies per step).
     """
 
-    def __init__(self, v: np.ndarray, parts, window: int = 12, noise: float = 1e-8):
+    def __init__(self, v: np.ndarray, parts, window: int = 12, noise: float = 1e-8, world=None, owned=None):
         self.v, self.parts, self.window, self.noise = v, parts, window, noise
+        # (several MPI processes: the products are summed over the ranks, each shared dof counted by its owner)
+        self.world = world or SERIAL
+        self.owned = None if owned is None else [owned if p is None else owned[p] for p in parts]
         self.prev = [np.empty(v.size if p is None else len(p)) for p in parts]
         self.have = [False] * len(parts)
         self.count = [0] * len(parts)
@@ -351,12 +355,16 @@ class OscillationWatch:
         hit = False
         for i, part in enumerate(self.parts):
             cur = self.v if part is None else self.v[part]
-            nv = float(np.linalg.norm(cur))
+            if self.owned is None:
+                nv, along = float(np.linalg.norm(cur)), float(cur @ self.prev[i]) if self.have[i] else 0.0
+            else:
+                mine = self.owned[i]
+                nv = np.sqrt(self.world.sum(cur[mine] @ cur[mine]))
+                along = self.world.sum(cur[mine] @ self.prev[i][mine]) if self.have[i] else 0.0
             self.peak[i] = max(self.peak[i], nv)
             # velocities at round-off level (a run at rest) carry no sign information
             significant = nv > self.noise * self.peak[i]
-            alternating = (self.have[i] and significant
-                           and float(cur @ self.prev[i]) < -0.5 * nv * self.prev_norm[i])
+            alternating = self.have[i] and significant and along < -0.5 * nv * self.prev_norm[i]
             self.count[i] = self.count[i] + 1 if alternating else 0
             self.norms[i].append(nv)  # (a deque of the last window + 1 norms)
             self.prev[i][:] = cur
@@ -376,9 +384,10 @@ class ChatterWatch:
     period of 5 steps or less) means the step cannot be trusted.
     """
 
-    def __init__(self, u_nu, window: int = 20, max_switches: int = 8, significant: float = 1e-2):
+    def __init__(self, u_nu, window: int = 20, max_switches: int = 8, significant: float = 1e-2, world=None):
         self.u_nu, self.window, self.max_switches = u_nu, window, max_switches
         self.significant = significant
+        self.world = world or SERIAL  # (several MPI processes: each watches its nodes, the largest |u_nu| is everyone's)
         self.history = collections.deque()  # the switches of the last `window` steps
         self.counts = None  # their sum per node, kept as the window moves (not summed again every step)
         self.prev = None
@@ -387,7 +396,7 @@ class ChatterWatch:
         u = self.u_nu()
         # a switch counts only where the node is clearly on either side: a node hovering at u_nu ~ 0
         # (near the clamp, or a decaying oscillation of a stable step) is not chatter
-        big = np.abs(u) > self.significant * (np.abs(u).max() + 1e-300)
+        big = np.abs(u) > self.significant * (self.world.max(np.abs(u).max(initial=0.0)) + 1e-300)
         state = np.where(big, np.sign(u), 0.0)
         if self.prev is not None:
             switched = (state * self.prev) < 0
@@ -400,7 +409,7 @@ class ChatterWatch:
         self.prev = np.where(state != 0, state, self.prev if self.prev is not None else 0.0)
         if len(self.history) < self.window:
             return False
-        return bool(self.counts.max() >= self.max_switches)
+        return self.world.any(self.counts.max(initial=0) >= self.max_switches)
 
 
 def march(disc, scheme, steps, recorder, *, progress=None, limit=None, limit_origin="the given limit", resume=False,
@@ -435,10 +444,17 @@ def march(disc, scheme, steps, recorder, *, progress=None, limit=None, limit_ori
         recorder.record(t, scheme, control=_control(steps, None, None))
     # a restarted run watches afresh: the watchers only stop a run (they never change its state), so the restart
     # delays the detection of an instability that began before it by at most their windows (12 and 20 steps)
-    watch = OscillationWatch(disc.v.vec.FV().NumPy(), [None] + ([disc.normal_dofs] if disc.dim > 1 else []))
-    chatter = ChatterWatch(lambda: disc.normal_displacement(u_np)) if scheme.chatter_watch else None
+    world = disc.world
+    owned = None
+    if world.parallel:
+        from ..parallel import owned as owned_dofs
+
+        owned = owned_dofs(disc.fes)
+    watch = OscillationWatch(disc.v.vec.FV().NumPy(), [None] + ([disc.normal_dofs] if disc.dim > 1 else []),
+                             world=world, owned=owned)
+    chatter = ChatterWatch(lambda: disc.normal_displacement(u_np), world=world) if scheme.chatter_watch else None
     n = steps.taken
-    bar = _progress_bar(progress, total=steps.n_steps, initial=n, unit="step", mininterval=0.5, leave=False,
+    bar = _progress_bar(progress if world.root else False, total=steps.n_steps, initial=n, unit="step", mininterval=0.5, leave=False,
                         desc=disc.scene.name)
     try:
         while not steps.done():
@@ -464,7 +480,7 @@ def march(disc, scheme, steps, recorder, *, progress=None, limit=None, limit_ori
                 steps.accepted()
             scheme.accept(t)
             n += 1
-            norm = float(np.abs(u_np).max())
+            norm = world.max(np.abs(u_np).max(initial=0.0))
             oscillating = watch.flipped()
             chattering = chatter is not None and chatter.chattering()
             if not math.isfinite(norm) or norm > bound or oscillating or chattering:

@@ -2,7 +2,7 @@
 
 Every backend yields ``(case, Dataset)`` as cases finish, in any order.
 
-The local workers are ``python -m workbench.study.worker`` subprocesses talking
+The local workers are :mod:`workbench.study.worker` subprocesses talking
 through pipes (length-prefixed pickles), not a ``multiprocessing`` pool: a
 spawned pool re-imports the caller's ``__main__``, so a study in a plain script
 without a main guard, on standard input or in some notebook set-ups died with
@@ -136,7 +136,9 @@ def subprocesses(tasks, n_workers: int):
         return
     n = max(1, min(n_workers, len(tasks)))
     env = dict(os.environ, OPENBLAS_NUM_THREADS="1", OMP_NUM_THREADS="1", MKL_NUM_THREADS="1")
-    workers = [subprocess.Popen([sys.executable, "-m", "workbench.study.worker", str(os.getpid())],
+    from .worker import START
+
+    workers = [subprocess.Popen([sys.executable, "-c", START, str(os.getpid())],
                                 stdin=subprocess.PIPE, stdout=subprocess.PIPE, env=env) for _ in range(n)]
     sel = selectors.DefaultSelector()
     busy = {}

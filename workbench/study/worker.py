@@ -1,4 +1,5 @@
-"""A study worker: ``python -m workbench.study.worker PARENT_PID``.
+"""A study worker: ``python -c "$START" PARENT_PID`` (:data:`START`: a process of its own that runs scenes only, which
+skips dask before anything imports xarray: :func:`workbench._lean_process`).
 
 Reads tasks (pickled argument tuples of :func:`workbench.study.execute.run_case`)
 from standard input, answers each with ``("ok", Dataset)`` or ``("error",
@@ -13,6 +14,10 @@ import sys
 import threading
 import time
 import traceback
+
+
+#: The worker's whole program (``python -m workbench.study.worker`` would import ``workbench.study``, so xarray, first).
+START = "import workbench; workbench._lean_process(); from workbench.study.worker import main; main()"
 
 
 def _die_with_parent(parent: int) -> None:
@@ -41,9 +46,6 @@ def main() -> None:
     channel = os.fdopen(os.dup(1), "wb")
     os.dup2(2, 1)  # prints inside a run go to stderr, never into the channel
     stdin = sys.stdin.buffer
-    from .. import _lean_process
-
-    _lean_process()
     from .execute import read_frame, run_case, write_frame
 
     while True:

@@ -1,0 +1,128 @@
+"""One case on several MPI processes (issue 13, item 5): ``mpiexec -n N workbench run ...`` against the serial run.
+
+The distributed run solves the same discrete problem (Model A's explicit scheme: K_A v_n = F_n - K_G u_{n-1}
+- j(beta_{n-1}, u_{n-1}, .)) with NGSolve's BDDC-preconditioned conjugate gradients to a relative residual of 1e-10
+where the serial run factors K_A: the archives must agree to that tolerance (a few 1e-10 after the steps), with the
+same layout; the step limit, estimated by a Lanczos over the ranks, must agree with the serial ARPACK estimate. The
+independent references are the serial runs of the same scenes, made in this process.
+"""
+import os
+import shutil
+import subprocess
+import sys
+from pathlib import Path
+
+import numpy as np
+import pytest
+
+import workbench
+
+#: A block whose left half is pressed into the foundation and whose right half is pulled off it while the glue
+#: (normal and tangential) debonds: every contact term and the bonding law act.
+BLOCK = dict(h=0.1, order=1, T=0.2, k=0.004, c_nu=50.0, gamma_nu=20.0, c_tau=2.0,
+             traction_top="(0.5*t, 0, 50*t*ifpos(x-0.5, 1, -1))", snapshots=(0.1,))
+#: The paper's slab of problem 4 on P2, with its point force at the tip (applied once, by its owner).
+SLAB = dict(h=0.05, order=2, T=0.1, k=0.002)
+
+
+def _mpiexec():
+    found = Path(sys.executable).parent / "mpiexec"
+    return str(found) if found.exists() else shutil.which("mpiexec")
+
+
+def _run_distributed(n, scene, values, out, extra=()):
+    """``mpiexec -n n workbench run scene --set name=value ... -o out``: (exit code, stdout, stderr)."""
+    sets = []
+    for name, value in values.items():
+        text = value if isinstance(value, str) else repr(list(value) if isinstance(value, tuple) else value)
+        sets += ["--set", f"{name}={text}"]
+    cmd = [_mpiexec(), "-n", str(n), sys.executable, "-m", "workbench.cli", "run", scene, *sets, "-o", str(out),
+           "--no-progress", *extra]
+    env = {k: v for k, v in os.environ.items() if not k.startswith(("PMI_", "OMPI_", "MV2_"))}
+    p = subprocess.run(cmd, capture_output=True, text=True, env=env, timeout=600, cwd=out.parent)
+    return p.returncode, p.stdout, p.stderr
+
+
+def _relative(a, b):
+    return float(np.abs(a - b).max() / max(np.abs(b).max(), 1e-300))
+
+
+@pytest.mark.parametrize("n, scene, values", [(2, "block", BLOCK), (3, "tp4", SLAB)], ids=["block-np2", "slab-P2-np3"])
+def test_a_distributed_run_equals_the_serial_run(tmp_path, n, scene, values):
+    """The archive of `mpiexec -n N workbench run` (rank 0 records and writes; ranks 1..N-1 hold the body) has the
+    serial archive's variables and coordinates, and its numbers to the solver's tolerance: u at the probes and the
+    contact side, beta, the contact pressure, the snapshot fields; the step limit agrees with the serial estimate."""
+    out = tmp_path / "mpi.nc"
+    code, stdout, stderr = _run_distributed(n, scene, values, out)
+    assert code == 0, stderr
+    assert stdout.count("wrote") == 1 and stderr.count("warning") <= 1, (stdout, stderr)  # rank 0 speaks alone
+    mpi = workbench.load(out)
+    serial = workbench.run(scene, progress=False, **values)
+    assert mpi.attrs["status"] == "complete" and mpi.attrs["mpi_processes"] == n
+    assert mpi.attrs["linear_solver"] == "cg" and mpi.attrs["ndof"] == serial.attrs["ndof"]
+    assert mpi.attrs["nsteps"] == serial.attrs["nsteps"]
+    restart_state = {v for v in serial.variables if v.startswith("state_")}
+    assert set(serial.variables) - restart_state == set(mpi.variables) - {"cg_iterations"}
+    for name in ("u_probe", "u_contact", "beta", "contact_pressure", "u_dofs", "u_nodes", "stress", "von_mises"):
+        if name in serial:
+            np.testing.assert_array_equal(mpi[name].shape, serial[name].shape)
+            assert _relative(mpi[name].values, serial[name].values) < 1e-8, name
+    for name in ("node_x", "facet_x", "vertex_x"):
+        if name in serial.coords:
+            np.testing.assert_array_equal(mpi[name].values, serial[name].values)
+    assert abs(mpi.attrs["k_crit"] / serial.attrs["k_crit"] - 1) < 1e-3
+    if scene == "block":  # (what the comparison is about: the laws act)
+        assert float(serial.beta.isel(time=-1).min()) < 0.9 and float(serial.contact_pressure.max()) > 0
+        assert int(mpi.cg_iterations.max()) >= 1
+
+
+def test_a_distributed_run_stops_as_the_serial_one(tmp_path):
+    """A state whose springs exceed the step (the stiff slab of the stability issue at k = 0.002): every rank stops
+    at the same step, rank 0 says it once (exit code 3) and writes the steps computed, as the serial run does."""
+    values = dict(h=0.05, k=0.002, T=0.3, c_nu=100.0, gamma_nu=20.0)
+    out = tmp_path / "stop.nc"
+    code, stdout, stderr = _run_distributed(2, "tp5", values, out)
+    assert code == 3 and stderr.count("error:") == 1 and "stability limit" in stderr, stderr
+    mpi = workbench.load(out)
+    with pytest.raises(workbench.Diverged) as err:
+        workbench.run("tp5", progress=False, **values)
+    serial = err.value.dataset
+    assert mpi.attrs["status"] == "incomplete" and mpi.sizes["time"] == serial.sizes["time"]
+    assert _relative(mpi.u_probe.values, serial.u_probe.values) < 1e-8
+
+
+def test_what_does_not_run_distributed_is_refused_once(tmp_path):
+    """The implicit scheme (it condenses on the contact dofs) on two processes: one `error:` line naming it, exit
+    code 2, before any work, nothing written."""
+    out = tmp_path / "x.nc"
+    code, stdout, stderr = _run_distributed(2, "tp5", dict(h=0.1, T=0.02, scheme="implicit"), out)
+    assert code == 2 and stderr.count("error:") == 1, stderr
+    assert "scheme = 'implicit'" in stderr and "one process" in stderr
+    assert not out.exists()
+
+
+def test_the_distributed_lanczos_agrees_with_arpack():
+    """The step limit's eigenvalue on several processes comes from :func:`workbench.stability.lanczos_largest`
+    (Lanczos in the K_A inner product, full reorthogonalisation); run here in one process on the slab's matrices with
+    springs on the whole contact side, it gives ARPACK's lambda_max (the serial estimate) to 1e-6."""
+    import scipy.sparse as sp
+
+    from workbench import discretisation, solvers, stability
+
+    d = discretisation.build(workbench.scene("tp5", h=0.05, c_nu=100.0))
+    free = np.nonzero(np.array(d.fes.FreeDofs(), dtype=bool))[0]
+    KA = solvers.to_scipy(d.viscous.mat)[free][:, free]
+    T = d.side.T_nu[:, free]
+    K = (solvers.to_scipy(d.elastic.mat)[free][:, free] + T.T @ sp.diags(100.0 * d.side.weights) @ T).tocsr()
+    factor = solvers.BandedCholesky(KA, np.arange(free.size))
+
+    def solve(y):
+        out = np.zeros_like(y)
+        factor.solve(y, out)
+        return out
+
+    lam, vec = stability.lanczos_largest(lambda x: K @ x, lambda x: KA @ x, solve, lambda x, y: x @ y,
+                                         np.ones(free.size))
+    arpack, _ = stability._largest_eigenvalue(K, KA, solve, np.ones(free.size))
+    assert abs(lam / arpack - 1) < 1e-6
+    assert _relative(K @ vec, lam * (KA @ vec)) < 1e-4  # an eigenvector
