@@ -15,6 +15,8 @@ from pathlib import Path
 
 import pytest
 
+from workbench.parallel import alone
+
 ROOT = Path(__file__).resolve().parents[1]
 PAGES = [ROOT / "README.md"] + sorted((ROOT / "docs").glob("*.md"))
 FENCE = re.compile(r"^```(\w*)[^\n]*\n(.*?)^```", re.S | re.M)
@@ -37,7 +39,7 @@ def commands():
             line = line.strip()
             if line.startswith("$ "):
                 line = line[2:]
-            if line.startswith("workbench "):
+            if line.startswith(("workbench ", "mpiexec ")):
                 out.append(pytest.param(line, id=f"{param.id}: {line[:60]}"))
     return out
 
@@ -70,9 +72,17 @@ def test_python_block_runs(code, scratch):
 
 @pytest.mark.parametrize("line", commands())
 def test_command_runs(line, scratch):
-    args = shlex.split(line)[1:]
-    p = subprocess.run([sys.executable, "-m", "workbench.cli", *args], cwd=scratch, capture_output=True, text=True,
-                       timeout=600)
+    """`workbench ...` as this interpreter's module; `mpiexec -n N workbench ...` with the MPI launcher installed beside
+    it (the test extra's mpich)."""
+    words = shlex.split(line)
+    start = words.index("workbench")
+    launcher = []
+    if start:
+        found = Path(sys.executable).parent / words[0]
+        launcher = [str(found) if found.exists() else words[0], *words[1:start]]
+    env = alone()
+    p = subprocess.run([*launcher, sys.executable, "-m", "workbench.cli", *words[start + 1:]], cwd=scratch,
+                       capture_output=True, text=True, timeout=600, env=env)
     assert p.returncode == 0, f"$ {line}\n--- stdout:\n{p.stdout[-2000:]}\n--- stderr:\n{p.stderr[-3000:]}"
     assert "Traceback" not in p.stderr
 

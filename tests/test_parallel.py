@@ -16,6 +16,7 @@ import numpy as np
 import pytest
 
 import workbench
+from workbench.parallel import alone
 
 #: A block whose left half is pressed into the foundation and whose right half is pulled off it while the glue
 #: (normal and tangential) debonds: every contact term and the bonding law act.
@@ -38,7 +39,7 @@ def _run_distributed(n, scene, values, out, extra=()):
         sets += ["--set", f"{name}={text}"]
     cmd = [_mpiexec(), "-n", str(n), sys.executable, "-m", "workbench.cli", "run", scene, *sets, "-o", str(out),
            "--no-progress", *extra]
-    env = {k: v for k, v in os.environ.items() if not k.startswith(("PMI_", "OMPI_", "MV2_"))}
+    env = alone()
     p = subprocess.run(cmd, capture_output=True, text=True, env=env, timeout=600, cwd=out.parent)
     return p.returncode, p.stdout, p.stderr
 
@@ -99,6 +100,14 @@ def test_what_does_not_run_distributed_is_refused_once(tmp_path):
     assert code == 2 and stderr.count("error:") == 1, stderr
     assert "scheme = 'implicit'" in stderr and "one process" in stderr
     assert not out.exists()
+
+
+def test_a_sweep_is_not_started_on_several_processes(tmp_path):
+    """`mpiexec -n 2 workbench study ...` would run the whole sweep on every rank: one `error:` line, exit code 2."""
+    cmd = [_mpiexec(), "-n", "2", sys.executable, "-m", "workbench.cli", "study", "tp1", "--k", "0.1", "0.05"]
+    env = alone()
+    p = subprocess.run(cmd, capture_output=True, text=True, env=env, timeout=300, cwd=tmp_path)
+    assert p.returncode == 2 and p.stderr.count("error:") == 1 and "one case" in p.stderr, p.stderr
 
 
 def test_the_distributed_lanczos_agrees_with_arpack():

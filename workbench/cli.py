@@ -415,6 +415,7 @@ def main(argv=None) -> int:
                 warnings.simplefilter("ignore")
             args = build_parser().parse_args(argv)
             token = invocation.set(shlex.join(["workbench"] + argv))
+            _one_case_per_launch(args.command)
             return args.func(args)
         except ParameterError as err:
             if sys.stdout is stdout:
@@ -435,6 +436,18 @@ def main(argv=None) -> int:
             if sys.stdout is not stdout:
                 sys.stdout.close()
                 sys.stdout = stdout
+
+
+def _one_case_per_launch(command: str) -> None:
+    """Several MPI processes share one case (``workbench run``); a sweep or the reproduction would run whole on every
+    rank: refused by name."""
+    from .parallel import world
+
+    w = world()
+    if w.parallel and command in ("study", "reproduce"):
+        raise ParameterError(f"workbench {command} on {w.size} MPI processes: an MPI launch runs one case "
+                             "(workbench run SCENE); start the sweep with one process (its cases run in worker "
+                             "processes, or on a dask cluster with --scheduler)")
 
 
 def _other_rank() -> bool:

@@ -42,6 +42,13 @@ from .errors import ParameterError
 SIZE_VARIABLES = ("PMI_SIZE", "OMPI_COMM_WORLD_SIZE", "MV2_COMM_WORLD_SIZE")
 
 
+def alone(environment=None) -> dict:
+    """A copy of the environment (default: this process's) without an MPI launcher's variables: a process started
+    from it runs alone (a study's worker), or under a launcher of its own."""
+    environment = os.environ if environment is None else environment
+    return {key: value for key, value in environment.items() if not key.startswith(("PMI_", "OMPI_", "MV2_", "PMIX_"))}
+
+
 class Serial:
     """The stand-in for one process: every reduction returns its argument."""
 
@@ -127,6 +134,9 @@ def check(scene, model, *, restart=None, checkpoint=None) -> None:
         why = "restart and checkpoint_every are not available on several processes"
     elif scene.dim == 1:
         why = "the rod (1D) does not run on several processes"
+    elif scene["order"] > 2:
+        why = (f"order = {scene['order']}: on several processes the displacement is P1 or P2 (the edge dofs of higher "
+               "orders depend on the edges' orientation on each rank)")
     if why:
         raise ParameterError(f"{scene.name} on {w.size} MPI processes: {why}; run it with one process")
 
@@ -183,9 +193,6 @@ class Shell:
         comm = self.w.comm
         fes, mesh = d.fes, d.mesh
         order = d.scene["order"]
-        if order > 2:
-            raise ParameterError(f"order = {order}: on several processes the displacement is P1 or P2 (the edge dofs "
-                                 "of higher orders depend on the edges' orientation on each rank)")
         dim = d.dim
         shell = serial_tree = None
         if self.w.root:

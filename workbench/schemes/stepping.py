@@ -454,8 +454,8 @@ def march(disc, scheme, steps, recorder, *, progress=None, limit=None, limit_ori
                              world=world, owned=owned)
     chatter = ChatterWatch(lambda: disc.normal_displacement(u_np), world=world) if scheme.chatter_watch else None
     n = steps.taken
-    bar = _progress_bar(progress if world.root else False, total=steps.n_steps, initial=n, unit="step", mininterval=0.5, leave=False,
-                        desc=disc.scene.name)
+    bar = _progress_bar(progress if world.root else False, total=steps.n_steps, initial=n, unit="step",
+                        mininterval=0.5, leave=False, desc=disc.scene.name)
     try:
         while not steps.done():
             t_prev, t = steps.next()

@@ -135,7 +135,9 @@ def subprocesses(tasks, n_workers: int):
     if not tasks:
         return
     n = max(1, min(n_workers, len(tasks)))
-    env = dict(os.environ, OPENBLAS_NUM_THREADS="1", OMP_NUM_THREADS="1", MKL_NUM_THREADS="1")
+    from ..parallel import alone
+
+    env = alone() | dict(OPENBLAS_NUM_THREADS="1", OMP_NUM_THREADS="1", MKL_NUM_THREADS="1")  # (a case each, alone)
     from .worker import START
 
     workers = [subprocess.Popen([sys.executable, "-c", START, str(os.getpid())],
