@@ -20,7 +20,10 @@ One untimed warm-up run of each comes first (disk caches, bytecode).
 
 Command (from the repository root; ~1 min at the default 7 repetitions)::
 
-    python studies/bench_whole_process.py [--reps 7] [--h 0.00625] [--k 0.001]
+    python studies/bench_whole_process.py [--reps 7] [--h 0.00625] [--k 0.001] [--old CHECKOUT]
+
+``--old CHECKOUT`` times an older checkout too (e.g. ``git worktree add /tmp/old COMMIT``), in the
+same rotation.
 """
 from __future__ import annotations
 
@@ -49,10 +52,10 @@ def workbench_command() -> list[str]:
     return [found]
 
 
-def timed(cmd: list[str], env: dict) -> tuple[float, str]:
+def timed(cmd: list[str], env: dict, cwd=ROOT) -> tuple[float, str]:
     """Run ``cmd`` to completion; return (wall seconds, stdout). A failure stops the benchmark."""
     start = time.perf_counter()
-    proc = subprocess.run(cmd, env=env, cwd=ROOT, capture_output=True, text=True)
+    proc = subprocess.run(cmd, env=env, cwd=cwd, capture_output=True, text=True)
     wall = time.perf_counter() - start
     if proc.returncode != 0:
         raise SystemExit(f"{' '.join(cmd)} failed ({proc.returncode}):\n{proc.stderr}")
@@ -71,6 +74,8 @@ def main(argv=None) -> None:
     ap.add_argument("--reps", type=int, default=7, help="timed repetitions of each program (default 7)")
     ap.add_argument("--h", type=float, default=0.00625, help="mesh size: nx = 1 / h, ny = 0.1 / h")
     ap.add_argument("--k", type=float, default=0.001, help="time step")
+    ap.add_argument("--old", help="also time an older checkout: the parent folder of its workbench package (run as "
+                    "python -m workbench.cli with it on PYTHONPATH, from a folder of its own)")
     args = ap.parse_args(argv)
     nx, ny = round(1.0 / args.h), round(0.1 / args.h)  # the slab is 1 x 0.1, as in the tp5 preset
 
@@ -83,24 +88,30 @@ def main(argv=None) -> None:
             "workbench": lambda i: workbench_command() + ["run", "tp5", "--h", repr(args.h), "--k", repr(args.k),
                                                           "-o", str(tmp / f"wb{i}.nc"), "--no-progress"],
         }
+        envs, cwds = {name: env for name in commands}, {name: ROOT for name in commands}
+        if args.old:  # (from its own folder: -m from the repository root would import the current package)
+            commands["old"] = lambda i: [sys.executable, "-m", "workbench.cli", "run", "tp5", "--h", repr(args.h),
+                                         "--k", repr(args.k), "-o", str(tmp / f"old{i}.nc"), "--no-progress"]
+            envs["old"], cwds["old"] = dict(env, PYTHONPATH=str(Path(args.old).resolve())), tmp
+        names = list(commands)
         for name, cmd in commands.items():  # warm-up, untimed
-            timed(cmd("warm"), env)
+            timed(cmd("warm"), envs[name], cwds[name])
         wall = {name: [] for name in commands}
         loop = {name: [] for name in commands}
         for i in range(args.reps):
-            order = ("plain", "workbench") if i % 2 == 0 else ("workbench", "plain")
-            for name in order:
-                seconds, out = timed(commands[name](i), env)
+            for name in names[i % len(names):] + names[: i % len(names)]:  # each goes first in turn
+                seconds, out = timed(commands[name](i), envs[name], cwds[name])
                 wall[name].append(seconds)
                 if name == "plain":
                     loop[name].append(plain_loop_time(out))
-            print(f"rep {i + 1}/{args.reps}: plain {wall['plain'][-1]:.3f} s, "
-                  f"workbench {wall['workbench'][-1]:.3f} s", flush=True)
+            print(f"rep {i + 1}/{args.reps}: " + ", ".join(f"{n} {wall[n][-1]:.3f} s" for n in names), flush=True)
 
         import workbench  # after the timing: reading the archives must not load the machine meanwhile
 
         for i in range(args.reps):
-            loop["workbench"].append(float(workbench.load(str(tmp / f"wb{i}.nc")).attrs["wall_time"]))
+            for name, prefix in (("workbench", "wb"), ("old", "old")):
+                if name in commands:
+                    loop[name].append(float(workbench.load(str(tmp / f"{prefix}{i}.nc")).attrs["wall_time"]))
 
     med = {n: statistics.median(w) for n, w in wall.items()}
     worst = {n: max(w) for n, w in wall.items()}
@@ -112,6 +123,11 @@ def main(argv=None) -> None:
     print(f"ratio workbench / plain: medians {med['workbench'] / med['plain']:.2f}, "
           f"worst {worst['workbench'] / worst['plain']:.2f}, median of paired ratios {statistics.median(paired):.2f}, "
           f"time loops {statistics.median(loop['workbench']) / statistics.median(loop['plain']):.2f}")
+    if "old" in wall:
+        paired = [w / o for w, o in zip(wall["workbench"], wall["old"])]
+        print(f"ratio workbench / old: medians {med['workbench'] / med['old']:.2f}, median of paired ratios "
+              f"{statistics.median(paired):.2f}, time loops "
+              f"{statistics.median(loop['workbench']) / statistics.median(loop['old']):.2f}")
 
 
 if __name__ == "__main__":
