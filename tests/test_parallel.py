@@ -110,10 +110,14 @@ def test_a_sweep_is_not_started_on_several_processes(tmp_path):
     assert p.returncode == 2 and p.stderr.count("error:") == 1 and "one case" in p.stderr, p.stderr
 
 
-def test_the_distributed_lanczos_agrees_with_arpack():
+def test_the_distributed_eigenvalue_iterations_agree_with_the_exact_eigenpair():
     """The step limit's eigenvalue on several processes comes from :func:`workbench.stability.lanczos_largest`
-    (Lanczos in the K_A inner product, full reorthogonalisation); run here in one process on the slab's matrices with
-    springs on the whole contact side, it gives ARPACK's lambda_max (the serial estimate) to 1e-6."""
+    (Lanczos in the K_A inner product, full reorthogonalisation; with the gathered factor) or from
+    :func:`workbench.stability.lobpcg_smallest` (LOBPCG with the CG's preconditioner, no solves). Run here in one
+    process on the slab's matrices with springs on the whole contact side (LOBPCG with a Jacobi preconditioner, far
+    weaker than BDDC), both give the largest eigenvalue of K x = lambda K_A x of a dense solve (LAPACK) to 1e-6 and its
+    eigenvector (1 - cos of the angle in the K inner product below 1e-6), and ARPACK's estimate (the serial one)."""
+    import scipy.linalg as la
     import scipy.sparse as sp
 
     from workbench import discretisation, solvers, stability
@@ -123,6 +127,8 @@ def test_the_distributed_lanczos_agrees_with_arpack():
     KA = solvers.to_scipy(d.viscous.mat)[free][:, free]
     T = d.side.T_nu[:, free]
     K = (solvers.to_scipy(d.elastic.mat)[free][:, free] + T.T @ sp.diags(100.0 * d.side.weights) @ T).tocsr()
+    mu, V = la.eigh(KA.toarray(), K.toarray())  # the smallest mu = 1 / lambda_max
+    exact, v = 1.0 / mu[0], V[:, 0]
     factor = solvers.BandedCholesky(KA, np.arange(free.size))
 
     def solve(y):
@@ -130,8 +136,15 @@ def test_the_distributed_lanczos_agrees_with_arpack():
         factor.solve(y, out)
         return out
 
-    lam, vec = stability.lanczos_largest(lambda x: K @ x, lambda x: KA @ x, solve, lambda x, y: x @ y,
-                                         np.ones(free.size))
-    arpack, _ = stability._largest_eigenvalue(K, KA, solve, np.ones(free.size))
-    assert abs(lam / arpack - 1) < 1e-6
-    assert _relative(K @ vec, lam * (KA @ vec)) < 1e-4  # an eigenvector
+    def angle(x):
+        return 1.0 - abs(x @ (K @ v)) / np.sqrt((x @ (K @ x)) * (v @ (K @ v)))
+
+    start = np.ones(free.size)
+    lam, vec = stability.lanczos_largest(lambda x: K @ x, lambda x: KA @ x, solve, lambda x, y: x @ y, start)
+    assert abs(lam / exact - 1) < 1e-6 and angle(vec) < 1e-6
+    jacobi = KA.diagonal()
+    m, vec = stability.lobpcg_smallest(lambda x: KA @ x, lambda x: K @ x, lambda r: r / jacobi, lambda x, y: x @ y,
+                                       start)
+    assert abs(1.0 / m / exact - 1) < 1e-6 and angle(vec) < 1e-6
+    arpack, _ = stability._largest_eigenvalue(K, KA, solve, start)
+    assert abs(arpack / exact - 1) < 1e-6

@@ -175,6 +175,7 @@ class DistributedSolver:
     def __init__(self, mat, pre, freedofs, vector, method: str):
         self.name = method
         self.fixed = np.nonzero(~np.array(freedofs, dtype=bool))[0]
+        self.pre = pre if method == "cg" else None
         if method == "cg":
             from ngsolve.krylovspace import CGSolver
 
@@ -183,6 +184,18 @@ class DistributedSolver:
             self.inv = mat.Inverse(freedofs, inverse="sparsecholesky")
         self.b, self.x = vector.CreateVector(), vector.CreateVector()
         self.last_iterations = 0
+
+    def precondition(self, r: np.ndarray) -> np.ndarray:
+        """The preconditioner (BDDC; ``cg`` only) applied to this rank's part of a residual: an approximate K_A^-1 r,
+        cumulated (the step limit's LOBPCG, :func:`workbench.stability.lobpcg_smallest`)."""
+        from .parallel import status
+
+        b = self.b.FV().NumPy()
+        b[:] = r
+        b[self.fixed] = 0.0
+        status(self.b, distributed=True)
+        self.x.data = self.pre.mat * self.b
+        return self.x.FV().NumPy().copy()
 
     def solve(self, rhs: np.ndarray, out: np.ndarray) -> None:
         from .parallel import status

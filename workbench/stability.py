@@ -341,8 +341,66 @@ class DistributedOperators:
         if v0 is None:  # (the same start on every rank: a shared dof's copies must agree)
             v0 = np.ones(d.ndof)
             v0[self.fixed] = 0.0
-        return lanczos_largest(apply_K, lambda x: self._apply(d.viscous.mat, x), solve,
-                               lambda x, y: self.world.sum(x @ y), v0)
+        apply_KA = lambda x: self._apply(d.viscous.mat, x)  # noqa: E731
+        inner = lambda x, y: self.world.sum(x @ y)  # noqa: E731
+        if getattr(self.solver, "pre", None) is not None:  # (CG: LOBPCG with its preconditioner, no solves)
+            mu, vector = lobpcg_smallest(apply_KA, apply_K, self.solver.precondition, inner, v0)
+            return 1.0 / mu, vector
+        return lanczos_largest(apply_K, apply_KA, solve, inner, v0)
+
+
+def lobpcg_smallest(apply_A, apply_B, precondition, inner, v0, tol: float = 1e-9, maxiter: int = 500):
+    """(mu_min, its eigenvector) of A x = mu B x (A, B symmetric positive definite) by LOBPCG with one vector
+    (Knyazev): Rayleigh-Ritz on x, the preconditioned residual and the previous direction, one application of the
+    preconditioner and of A and B an iteration, no solves; stopped when mu changes by less than ``tol`` relative
+    (mu converges as the square of the vector's error). ``inner``, ``v0``: as :func:`lanczos_largest`. The step
+    limit's estimate on several processes with conjugate gradients: lambda_max = 1 / mu_min of K_A x = mu K x.
+
+    >>> import numpy as np
+    >>> A, B = np.diag([1.0, 2.0, 4.0, 8.0]), np.diag([1.0, 4.0, 2.0, 1.0])
+    >>> mu, _ = lobpcg_smallest(lambda x: A @ x, lambda x: B @ x, lambda r: r / np.diag(A), lambda x, y: x @ y,
+    ...                         np.ones(4))
+    >>> round(mu, 10)
+    0.5
+    """
+    import scipy.linalg as la
+
+    def normalised(v, Av, Bv):
+        n = np.sqrt(max(inner(v, Bv), 1e-300))
+        return v / n, Av / n, Bv / n
+
+    x, Ax, Bx = normalised(np.asarray(v0, dtype=float).copy(), apply_A(v0), apply_B(v0))
+    mu = inner(x, Ax)
+    p = None
+    for _ in range(maxiter):
+        w = precondition(Ax - mu * Bx)
+        Aw, Bw = apply_A(w), apply_B(w)
+        if not inner(w, Bw) > 0:  # (the residual vanished: x is an eigenvector)
+            break
+        basis = [(x, Ax, Bx), normalised(w, Aw, Bw)] + ([p] if p is not None else [])
+        while True:  # Rayleigh-Ritz on the basis; a basis that became dependent drops its last direction
+            GA = np.array([[inner(u[0], v[1]) for v in basis] for u in basis])
+            GB = np.array([[inner(u[0], v[2]) for v in basis] for u in basis])
+            try:
+                values, vectors = la.eigh(0.5 * (GA + GA.T), 0.5 * (GB + GB.T))
+                break
+            except (la.LinAlgError, ValueError):
+                if len(basis) == 2:
+                    return mu, x
+                basis = basis[:-1]
+        c = vectors[:, 0]
+        new = [sum(ci * b[j] for ci, b in zip(c, basis)) for j in range(3)]
+        p = normalised(*[sum(ci * b[j] for ci, b in zip(c[1:], basis[1:])) for j in range(3)])
+        x, Ax, Bx = normalised(*new)
+        mu_new = float(values[0])
+        if abs(mu_new - mu) <= tol * abs(mu_new):
+            return mu_new, x
+        mu = mu_new
+    else:
+        raise ParameterError(f"the explicit scheme's step limit k_crit cannot be estimated for these values (LOBPCG "
+                             f"did not settle in {maxiter} iterations); check the moduli (E, a1, a2, c_nu, gamma_nu) "
+                             "or use scheme = 'implicit'")
+    return mu, x
 
 
 def lanczos_largest(apply_K, apply_KA, solve, inner, v0, tol: float = 1e-8, steps: int = 300):
