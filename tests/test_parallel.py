@@ -102,6 +102,20 @@ def test_what_does_not_run_distributed_is_refused_once(tmp_path):
     assert not out.exists()
 
 
+def test_a_python_script_under_the_launcher(tmp_path):
+    """`mpiexec -n 2 python script.py` with `workbench.run` in it, as the docs say: the Dataset on rank 0, None on the
+    other rank, and a warning (P1 on the thin block) given once, by rank 0."""
+    script = tmp_path / "script.py"
+    script.write_text("import workbench\nfrom workbench.parallel import world\n"
+                      "ds = workbench.run('block', h=0.25, order=1, T=0.01, k=0.002, progress=False)\n"
+                      "print('RANK', world().rank, ds is None, None if ds is None else ds.attrs['mpi_processes'])\n")
+    p = subprocess.run([_mpiexec(), "-n", "2", sys.executable, str(script)], capture_output=True, text=True,
+                       env=alone(), timeout=300, cwd=tmp_path)
+    assert p.returncode == 0, p.stderr
+    assert "RANK 0 False 2" in p.stdout and "RANK 1 True None" in p.stdout, p.stdout
+    assert p.stderr.count("lock in bending") == 1, p.stderr
+
+
 def test_a_sweep_is_not_started_on_several_processes(tmp_path):
     """`mpiexec -n 2 workbench study ...` would run the whole sweep on every rank: one `error:` line, exit code 2."""
     cmd = [_mpiexec(), "-n", "2", sys.executable, "-m", "workbench.cli", "study", "tp1", "--k", "0.1", "0.05"]

@@ -176,8 +176,7 @@ def owned(fes) -> np.ndarray:
     pardofs = fes.ParallelDofs()
     if pardofs is None:
         return np.ones(fes.ndof, dtype=bool)
-    master = pardofs.MasterDofs()
-    return np.array([master[i] for i in range(fes.ndof)], dtype=bool)
+    return np.array(pardofs.MasterDofs(), dtype=bool)
 
 
 class Shell:

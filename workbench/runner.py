@@ -9,6 +9,7 @@ Examples
 """
 from __future__ import annotations
 
+import contextlib
 import warnings
 
 import numpy as np
@@ -130,8 +131,19 @@ def run(scene=None, *, restart=None, checkpoint=None, progress=None, record_time
     given += [f"{k}={results.brief(v)}" for k, v in (("record_times", record_times), ("times", times),
                                                      ("limit", limit), ("threads", threads)) if v is not None]
     call = f"workbench.run({', '.join(given)})"
-    with blas_single_threaded():
+    with blas_single_threaded(), _quiet_unless_rank0():
         return _run(sc, model, grid, record_times, progress, limit, threads, call, resume, checkpoint)
+
+
+@contextlib.contextmanager
+def _quiet_unless_rank0():
+    """On several MPI processes the ranks other than 0 give no warnings (rank 0 gives them for all)."""
+    if parallel.world().root:
+        yield
+        return
+    with warnings.catch_warnings():
+        warnings.simplefilter("ignore")
+        yield
 
 
 def _run(sc, model, grid, record_times, progress, limit, threads, call, resume=None, checkpoint=None):
