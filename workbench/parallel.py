@@ -21,9 +21,10 @@ dof order and beta in the serial facet order, and records them with the serial c
 archive, which rank 0 writes, has the serial run's layout and numbers to the solver's
 tolerance (tests/test_parallel.py).
 
-What runs: Model A's explicit scheme, on any body whose contact side holds no pinned
-vertex. Refused by name before any work (:func:`check`): the other schemes and Model B
-(they condense on the contact dofs), restarts and checkpoints, VTK files.
+What runs: Model A's explicit scheme, P1 or P2, in 2D and 3D, on any body whose contact side
+holds no pinned vertex; the archive, its plot and its VTK files are rank 0's. Refused by name
+before any work (:func:`check`): the other schemes and Model B (they condense on the contact
+dofs), restarts and checkpoints, the rod, higher orders, the banded and umfpack solvers.
 
 Started without mpirun (or with one process) nothing here is used: :data:`SERIAL` stands in,
 and its reductions return their arguments.
