@@ -469,7 +469,7 @@ def build(model_or_scene, scene=None) -> Discretisation:
     else:
         mesh = geometry.mesh()
     fes = _vector_space(geometry, mesh, scene["order"])
-    if w.parallel and scene["solver"] in ("auto", "cg"):
+    if parallel.conjugate_gradients(scene):
         _vertex_wirebasket(fes, geometry.dim, mesh.nv)
     d = Discretisation(model, scene, mesh, fes, w)
     if model.kind == "B":
@@ -492,7 +492,7 @@ def serial_shell(model, scene, mesh) -> Discretisation:
 def _kelvin_voigt_parts(d: Discretisation, matrices: bool = True) -> None:
     m = d.model
     if matrices:  # (several processes: K_A with the BDDC preconditioner of the conjugate gradients)
-        if d.world.parallel and d.scene["solver"] in ("auto", "cg"):
+        if parallel.conjugate_gradients(d.scene):
             d.viscous, d.viscous_pre = stiffness(d.fes, m.viscous, d.dim, "bddc")
         else:
             d.viscous = stiffness(d.fes, m.viscous, d.dim)

@@ -142,6 +142,12 @@ def check(scene, model, *, restart=None, checkpoint=None) -> None:
         raise ParameterError(f"{scene.name} on {w.size} MPI processes: {why}; run it with one process")
 
 
+def conjugate_gradients(scene) -> bool:
+    """Whether a distributed run solves with BDDC-preconditioned CG (``solver = auto | cg``; else the factor gathered on
+    rank 0)."""
+    return world().parallel and scene["solver"] in ("auto", "cg")
+
+
 def distribute(geometry):
     """(the mesh part of this rank, the whole serial mesh on rank 0 (None elsewhere))."""
     import netgen.meshing as nm

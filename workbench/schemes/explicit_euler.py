@@ -22,7 +22,7 @@ import warnings
 
 import numpy as np
 
-from .. import solvers, stability
+from .. import parallel, solvers, stability
 from ..errors import StepLimitExceeded
 from ..physics.ops import NP
 from .base import KelvinVoigtScheme
@@ -40,7 +40,7 @@ class ExplicitEuler(KelvinVoigtScheme):
         super().__init__(disc)
         d = self.d
         if d.world.parallel:  # (several MPI processes: BDDC-preconditioned CG, or the factor gathered on rank 0)
-            method = "sparsecholesky" if d.scene["solver"] == "sparsecholesky" else "cg"
+            method = "cg" if parallel.conjugate_gradients(d.scene) else "sparsecholesky"
             self.solver = solvers.DistributedSolver(d.viscous.mat, d.viscous_pre, d.fes.FreeDofs(), d.u.vec, method)
         else:
             method = solvers.choose(d.scene["solver"], d.dim, d.ndof, iterative=True)
