@@ -58,8 +58,8 @@ class _NumPy:
 
     @staticmethod
     def ifpos(s, a, b):
-        with np.errstate(invalid="ignore", divide="ignore", over="ignore"):
-            return np.where(s > 0, a, b)
+        # (a and b are evaluated by the caller; a comparison with NaN warns of nothing: no errstate, 1.5 us a call)
+        return np.where(s > 0, a, b)
 
     def pos(self, s):
         return np.where(s > 0, s, 0.0)
