@@ -24,7 +24,9 @@ tolerance (tests/test_parallel.py).
 What runs: Model A's explicit scheme, P1 or P2, in 2D and 3D, on any body whose contact side
 holds no pinned vertex; the archive, its plot and its VTK files are rank 0's. Refused by name
 before any work (:func:`check`): the other schemes and Model B (they condense on the contact
-dofs), restarts and checkpoints, the rod, higher orders, the banded and umfpack solvers.
+dofs), the rod, higher orders, the banded and umfpack solvers. Restarts and checkpoints hold the
+state in the serial order (:meth:`Shell.serial_state`), so a distributed run's archive goes on with
+one process or with another number of ranks, and a one-process archive on several.
 
 Started without mpirun (or with one process) nothing here is used: :data:`SERIAL` stands in,
 and its reductions return their arguments.
@@ -117,7 +119,7 @@ def world():
     return World(MPI.COMM_WORLD) if MPI.COMM_WORLD.size > 1 else SERIAL
 
 
-def check(scene, model, *, restart=None, checkpoint=None) -> None:
+def check(scene, model) -> None:
     """Refuse, by name and before any work, what does not run distributed (module docs)."""
     w = world()
     if not w.parallel:
@@ -131,8 +133,6 @@ def check(scene, model, *, restart=None, checkpoint=None) -> None:
                "with BDDC; 'auto' takes it) or 'sparsecholesky' (the factor gathered on rank 0)")
     elif model.geometry.pins_contact:
         why = f"the {scene.geometry} body holds contact vertices (its apex): not on several processes"
-    elif restart is not None or scene["checkpoint_every"]:
-        why = "restart and checkpoint_every are not available on several processes"
     elif scene.dim == 1:
         why = "the rod (1D) does not run on several processes"
     elif scene["order"] > 2:
@@ -186,119 +186,196 @@ def owned(fes) -> np.ndarray:
     return np.array(pardofs.MasterDofs(), dtype=bool)
 
 
+class Order:
+    """Where each of this rank's items (dofs, contact facets, contact points) stands in the serial run's order: rank 0
+    gathers values into that order (:meth:`gather`) and hands them back out of it (:meth:`scatter`).
+
+    ``index``: the serial number of each local item; ``send``: which local items to send when gathering (a dof shared
+    by ranks is sent by its owner alone; default all); ``size``: the serial count.
+    """
+
+    def __init__(self, comm, index: np.ndarray, send=None, size: int | None = None, what: str = "item"):
+        self.comm, self.index = comm, np.asarray(index, dtype=np.int64)
+        self.send = send
+        sent = self.index if send is None else self.index[send]
+        everyone = comm.gather(sent, root=0)
+        failed = False
+        if comm.rank == 0:
+            self.targets = np.concatenate(everyone)
+            self.counts = [len(t) for t in everyone]
+            self.size = len(self.targets) if size is None else size
+            failed = len(self.targets) != self.size or len(np.unique(self.targets)) != self.size
+        if comm.bcast(failed, root=0):  # (every rank raises: one alone would leave the others waiting)
+            raise RuntimeError(f"the ranks' {what}s do not cover the serial run's once each")
+
+    def gather(self, local: np.ndarray):
+        """The values of every rank's items in the serial order, on rank 0 (None elsewhere); collective."""
+        values = np.ascontiguousarray(local if self.send is None else local[self.send], dtype=float)
+        if self.comm.rank != 0:
+            self.comm.Gatherv(values, None, root=0)
+            return None
+        buffer = np.empty(sum(self.counts))
+        self.comm.Gatherv(values, (buffer, self.counts), root=0)
+        out = np.empty(self.size)
+        out[self.targets] = buffer
+        return out
+
+    def pick(self, serial: np.ndarray) -> np.ndarray:
+        """This rank's values of ``serial`` (in the serial order, known to this rank: e.g. read from an archive)."""
+        return np.asarray(serial)[self.index]
+
+
 class Shell:
     """Rank 0's serial view of a distributed discretisation (module docs): ``disc`` is a discretisation on the serial
     mesh without matrices; :meth:`gather` fills its u (and v, beta) from the ranks' parts.
 
-    The serial order is found once: the local vertices by their coordinates among the serial mesh's (KD-tree, on
-    rank 0), P2's edge dofs by their two vertices, the contact facets by their midpoints; only owned copies are sent.
+    The serial order is found once (:class:`Order`): the local vertices by their coordinates among the serial mesh's
+    (KD-tree, on rank 0), P2's edge dofs by their two vertices, the contact facets and the contact side's quadrature
+    points by their coordinates.
     """
 
     def __init__(self, d, serial_mesh):
+        import ngsolve as ngs
+
         self.w, self.local = world(), d
         comm = self.w.comm
-        fes, mesh = d.fes, d.mesh
-        order = d.scene["order"]
-        dim = d.dim
-        shell = serial_tree = None
+        fes, mesh, dim = d.fes, d.mesh, d.dim
+        shell = None
         if self.w.root:
-            from scipy.spatial import cKDTree
-
             from .discretisation import serial_shell
 
             shell = serial_shell(d.model, d.scene, serial_mesh)
-            serial_tree = cKDTree(shell.vertex_xyz)
-        numbers = _match(comm, d.vertex_xyz, serial_tree, "vertex")
-        self.global_vertex = numbers
         self.disc = shell
-        # the dofs of each local vertex (and P2 edge), by node; their serial counterparts on rank 0
-        import ngsolve as ngs
-
-        vdofs = d.vertex_dofs
-        edges = np.zeros((0, 2), dtype=np.int64)
-        edofs = np.zeros((0, dim), dtype=np.int64)
-        if order > 1 and mesh.nedge:
-            edges = np.sort(numbers[np.array([[v.nr for v in e.vertices] for e in mesh.edges], dtype=np.int64)],
-                            axis=1)
-            edofs = np.array([fes.GetDofNrs(ngs.NodeId(ngs.EDGE, e)) for e in range(mesh.nedge)],
-                             dtype=np.int64).reshape(-1, dim)
+        numbers = _serial_numbers(comm, d.vertex_xyz, shell.vertex_xyz if shell else None, "vertex")
         mine = owned(fes)
         if d.loads.point_force is not None:  # added once: where the serial run's vertex is owned
             target = self.w.bcast(shell.loads.point_vertex if self.w.root else None)
             hits = np.nonzero(numbers == target)[0] if target is not None else []
             here = len(hits) and mine[d.vertex_dofs[hits[0], 0]]
             d.loads.relocate_point_force(int(hits[0]) if here else None)
-        local_dofs = np.concatenate([vdofs.ravel(), edofs.ravel()])
-        keep = mine[local_dofs]
-        self.send_dofs = local_dofs[keep]
-        plans = comm.gather((numbers, edges, keep), root=0)
+        # the dofs of each local vertex (and P2 edge) and their serial counterparts, found on rank 0
+        edges = np.zeros((0, 2), dtype=np.int64)
+        edofs = np.zeros((0, dim), dtype=np.int64)
+        if d.scene["order"] > 1 and mesh.nedge:
+            edges = np.sort(numbers[np.array([[v.nr for v in e.vertices] for e in mesh.edges], dtype=np.int64)],
+                            axis=1)
+            edofs = np.array([fes.GetDofNrs(ngs.NodeId(ngs.EDGE, e)) for e in range(mesh.nedge)],
+                             dtype=np.int64).reshape(-1, dim)
+        self.local_dofs = np.concatenate([d.vertex_dofs.ravel(), edofs.ravel()])
+        plans = comm.gather((numbers, edges), root=0)
+        serial_dofs = None
         if self.w.root:
-            s = shell
-            s_edge = {}
-            if order > 1:
-                s_edge = {tuple(sorted(v.nr for v in e.vertices)): e.nr for e in s.mesh.edges}
-            targets = []
-            for nums, edg, kp in plans:
-                tv = s.vertex_dofs[nums].ravel()
-                te = (np.array([s.fes.GetDofNrs(ngs.NodeId(ngs.EDGE, s_edge[tuple(p)])) for p in edg],
+            edge_of = {tuple(sorted(v.nr for v in e.vertices)): e.nr for e in shell.mesh.edges} if len(edges) or \
+                any(len(e) for _, e in plans) else {}
+            serial_dofs = []
+            for nums, edg in plans:
+                te = (np.array([shell.fes.GetDofNrs(ngs.NodeId(ngs.EDGE, edge_of[tuple(p)])) for p in edg],
                                dtype=np.int64).ravel() if len(edg) else np.zeros(0, dtype=np.int64))
-                targets.append(np.concatenate([tv, te])[kp])
-            self.targets = np.concatenate(targets)
-            self.counts = [len(t) for t in targets]
-            if len(self.targets) != s.ndof or len(np.unique(self.targets)) != s.ndof:
-                raise RuntimeError("the ranks' dofs do not cover the serial space once each")
-        # beta: each contact facet lies on one rank; matched by its midpoint
-        self.has_beta = d.beta is not None
-        if self.has_beta:
-            facet_tree = cKDTree(shell.facet_xyz) if self.w.root else None
-            self.facet_targets = _match(comm, d.facet_xyz, facet_tree, "contact facet", gather_to_root=True)
-            self.facet_counts = comm.gather(len(d.facet_xyz), root=0)
+                serial_dofs.append(np.concatenate([shell.vertex_dofs[nums].ravel(), te]))
+        self.dofs = Order(comm, comm.scatter(serial_dofs, root=0), send=mine[self.local_dofs],
+                          size=shell.ndof if shell else None, what="dof")
+        self.facets = self.points = None
+        if d.beta is not None:  # each contact facet lies on one rank
+            self.facets = Order(comm, _serial_numbers(comm, d.facet_xyz, shell.facet_xyz if shell else None,
+                                                      "contact facet"), what="contact facet")
+        if d.side is not None:  # and so does each contact point (the step limit's envelope is kept per point)
+            self.points = Order(comm, _serial_points(comm, d.side, shell.side if shell else None),
+                                what="contact point")
 
     def gather(self, velocity: bool = False) -> None:
         """u (and ``velocity``: v), beta of every rank into the shell on rank 0 (collective: every rank calls it)."""
-        d = self.local
-        for vec, target in ((d.u.vec, "u"), (d.v.vec, "v"))[: 2 if velocity else 1]:
-            self._gather(vec.FV().NumPy()[self.send_dofs], self.counts if self.w.root else None,
-                         None if not self.w.root else (getattr(self.disc, target).vec.FV().NumPy(), self.targets))
-        if self.has_beta:
-            beta = d.beta.vec.FV().NumPy()[d.beta_dofs]
-            s = self.disc
-            self._gather(beta, self.facet_counts if self.w.root else None,
-                         None if not self.w.root else (s.beta.vec.FV().NumPy(), s.beta_dofs[self.facet_targets]))
+        d, s = self.local, self.disc
+        for name in ("u", "v")[: 2 if velocity else 1]:
+            full = self.dofs.gather(getattr(d, name).vec.FV().NumPy()[self.local_dofs])
+            if s is not None:
+                getattr(s, name).vec.FV().NumPy()[:] = full
+        if self.facets is not None:
+            beta = self.facets.gather(d.beta.vec.FV().NumPy()[d.beta_dofs])
+            if s is not None:
+                s.beta.vec.FV().NumPy()[s.beta_dofs] = beta
 
-    def _gather(self, local, counts, into) -> None:
-        comm = self.w.comm
-        local = np.ascontiguousarray(local, dtype=float)
-        if into is None:
-            comm.Gatherv(local, None, root=0)
-            return
-        buffer = np.empty(sum(counts))
-        comm.Gatherv(local, (buffer, counts), root=0)
-        array, where = into
-        array[where] = buffer
+    def serial_state(self, state: dict, layout: dict):
+        """A scheme's state (:meth:`workbench.schemes.base.Scheme.state`) in the serial order, on rank 0 (None
+        elsewhere): u, v, beta and the arrays of its ``extra`` that ``layout`` names ("dof" or "point": a contact
+        point's); collective."""
+        out = dict(state)
+        out["u"], out["v"] = (self.dofs.gather(np.asarray(state[k])[self.local_dofs]) for k in ("u", "v"))
+        if state["beta"] is not None:
+            out["beta"] = self.facets.gather(state["beta"])
+        out["extra"] = dict(state["extra"])
+        for key, where in layout.items():
+            if key in state["extra"]:
+                order, value = self._order(where), np.asarray(state["extra"][key])
+                out["extra"][key] = order.gather(value[self.local_dofs] if where == "dof" else value)
+        if state["history"]:
+            raise NotImplementedError("a distributed scheme keeps no history of accepted states")
+        return out if self.w.root else None
+
+    def local_state(self, state: dict, layout: dict) -> dict:
+        """This rank's part of a scheme's state in the serial order (:meth:`serial_state`; every rank has it)."""
+        out = dict(state)
+        out["u"], out["v"] = (self._local_dofs(state[k]) for k in ("u", "v"))
+        if state["beta"] is not None:
+            out["beta"] = self.facets.pick(state["beta"])
+        out["extra"] = dict(state["extra"])
+        for key, where in layout.items():
+            if key in state["extra"]:
+                value = state["extra"][key]
+                out["extra"][key] = self._local_dofs(value) if where == "dof" else self._order(where).pick(value)
+        return out
+
+    def _order(self, where: str) -> Order:
+        return {"dof": self.dofs, "point": self.points, "facet": self.facets}[where]
+
+    def _local_dofs(self, serial) -> np.ndarray:
+        out = np.zeros(self.local.ndof)
+        out[self.local_dofs] = self.dofs.pick(serial)
+        return out
 
 
-def _match(comm, xyz, tree, what, gather_to_root=False):
-    """The serial numbers of points (local vertex or facet coordinates), found on rank 0 in ``tree``; returned on every
-    rank for its own points, or (``gather_to_root``) on rank 0 for all ranks' points in rank order."""
-    everyone = comm.gather(np.asarray(xyz, dtype=float), root=0)
-    found = None
+def _serial_numbers(comm, xyz, serial_xyz, what, group=None, serial_group=None):
+    """The serial number of each of this rank's points (vertex, facet midpoint, contact point coordinates): found on
+    rank 0 by a KD-tree over ``serial_xyz`` (given there), to 1e-9 of the body's size. With ``group`` (per point) and
+    ``serial_group`` the match must lie in the same group: two facets' quadrature points may share coordinates (the
+    3D rule of P1 has them at the edge midpoints), one facet's do not."""
+    everyone = comm.gather((np.asarray(xyz, dtype=float), group), root=0)
+    found, failed = None, False
     if comm.rank == 0:
-        scale = max(float(np.ptp(tree.data, axis=0).max()), 1e-300) if len(tree.data) else 1.0
+        from scipy.spatial import cKDTree
+
+        tree = cKDTree(serial_xyz)
+        scale = max(float(np.ptp(serial_xyz, axis=0).max()), 1e-300) if len(serial_xyz) else 1.0
+        k = 1 if serial_group is None else min(16, len(serial_xyz))
         found = []
-        for points in everyone:
-            if not len(points):
-                found.append(np.zeros(0, dtype=np.int64))
-                continue
-            dist, index = tree.query(points)
-            if np.any(dist > 1e-9 * scale):
-                raise RuntimeError(f"a {what} of a rank has no serial counterpart")
+        for points, groups in everyone:
+            index = np.zeros(0, dtype=np.int64)
+            if len(points):
+                dist, near = tree.query(points, k=k)
+                dist, near = dist.reshape(len(points), k), near.reshape(len(points), k)
+                fits = dist <= 1e-9 * scale
+                if serial_group is not None:
+                    fits &= serial_group[near] == np.asarray(groups)[:, None]
+                failed |= not fits.any(axis=1).all()
+                index = near[np.arange(len(points)), np.argmax(fits, axis=1)]
             found.append(np.asarray(index, dtype=np.int64))
-        if gather_to_root:
-            return np.concatenate(found)
-    if gather_to_root:
-        return None
+    if comm.bcast(failed, root=0):  # (every rank raises: one alone would leave the others waiting)
+        raise RuntimeError(f"a {what} of a rank has no serial counterpart")
     return comm.scatter(found, root=0)
+
+
+def _serial_points(comm, side, serial_side):
+    """The serial number of each of this rank's contact points: its facet found by the facet's centroid (the mean of
+    its points), then the point by its coordinates among that facet's."""
+    def centroids(s):
+        out = np.zeros((len(s.facets), s.dim))
+        np.add.at(out, s.element, s.xyz)
+        return out / np.bincount(s.element, minlength=len(s.facets))[:, None]
+
+    serial_centroids = centroids(serial_side) if serial_side is not None else None
+    facet = _serial_numbers(comm, centroids(side), serial_centroids, "contact facet")
+    return _serial_numbers(comm, side.xyz, serial_side.xyz if serial_side is not None else None, "contact point",
+                           group=facet[side.element],
+                           serial_group=serial_side.element if serial_side is not None else None)
 
 
 class GatheringRecorder:
@@ -325,3 +402,11 @@ class GatheringRecorder:
     def dataset(self, attrs: dict):
         """The Dataset (on rank 0)."""
         return self.recorder.dataset(attrs)
+
+    def state(self) -> dict:
+        """The record schedule (rank 0's; the others keep none)."""
+        return self.recorder.state() if self.w.root else {}
+
+    def resume(self, ds, state: dict) -> None:
+        if self.w.root:
+            self.recorder.resume(ds, state)

@@ -71,9 +71,16 @@ class NoRestartState(ParameterError):
 # -- the state in a Dataset -------------------------------------------------------------------------------------
 
 def capture(scheme, steps, recorder) -> dict:
-    """The full state of a run between two steps (copies)."""
-    return {"time": steps.t, "scheme_name": scheme.name, "scheme": scheme.state(restart=True),
-            "steps": steps.state(), "recorder": recorder.state()}
+    """The full state of a run between two steps (copies); on several MPI processes in the serial order, on rank 0
+    (None on the others; every rank must call it)."""
+    state = scheme.state(restart=True)
+    shell = scheme.d.shell
+    if shell is not None:
+        state = shell.serial_state(state, scheme.distributed_layout)
+        if state is None:
+            return None
+    return {"time": steps.t, "scheme_name": scheme.name, "scheme": state, "steps": steps.state(),
+            "recorder": recorder.state()}
 
 
 def attach(ds: xr.Dataset, state: dict) -> xr.Dataset:
@@ -197,11 +204,15 @@ def decode(ds: xr.Dataset) -> dict:
 
 def restore(state: dict, disc, scheme, steps, recorder, archive: xr.Dataset) -> None:
     """Put the run back where the archive left it (the discretisation must be the archive's)."""
-    if state["ndof"] != disc.ndof or state["scheme_name"] != scheme.name:
+    ndof = disc.fes.ndofglobal  # (several MPI processes: the archive is in the serial order, Shell.local_state)
+    if state["ndof"] != ndof or state["scheme_name"] != scheme.name:
         raise ParameterError(f"the archive's restart state is for {state['ndof']} dofs of the {state['scheme_name']} "
-                             f"scheme, this run has {disc.ndof} of the {scheme.name} scheme (an archive of another "
+                             f"scheme, this run has {ndof} of the {scheme.name} scheme (an archive of another "
                              "workbench version?); run it again from the start")
-    scheme.restore(state["scheme"])
+    local = state["scheme"]
+    if disc.shell is not None:
+        local = disc.shell.local_state(local, scheme.distributed_layout)
+    scheme.restore(local)
     steps.restore(state["steps"])
     recorder.resume(archive, state["recorder"])
 

@@ -125,7 +125,8 @@ class Recorder:
     whatever the step sizes; with ``every_step``, for error-controlled runs whose short
     steps are where things happen: every step, halved to every other one whenever
     ``max_records`` are reached), and whole fields at the ``snapshots`` times (which the
-    step controller lands on exactly) and at T.
+    step controller lands on exactly) and at T. A diagnostic that a record does not give
+    (a run continued with another solver: ``cg_iterations``) is NaN there.
     """
 
     def __init__(self, disc, T: float, snapshots=(), record_times=None, max_records: int = 2000,
@@ -188,16 +189,21 @@ class Recorder:
             self.u_contact.append(u[d.node_dofs])
             if d.beta is not None:
                 self.beta.append(d.beta.vec.FV().NumPy()[d.beta_dofs].copy())
-            i = len(self.times) - 1
+            n = len(self.times)
+            # (a run continued from an archive made with another solver, e.g. on another number of MPI processes,
+            # gives other diagnostics: cg_iterations. A column is NaN at the records that did not give it)
             for key, val in (scheme.diagnostics() | (control or {})).items():
-                self.extra.setdefault(key, []).append(val)
+                column = self.extra.setdefault(key, [])
+                column.extend([np.nan] * (n - 1 - len(column)))
+                column.append(val)
+            for column in self.extra.values():
+                column.extend([np.nan] * (n - len(column)))
             for key, arr in scheme.node_values(t).items():
                 self.node_extra.setdefault(key, []).append(np.asarray(arr))
             if self.weights is None:
                 self.weights, self.points = scheme.node_weights(), scheme.contact_points()
             for key, arr in scheme.point_values(t).items():
                 self.point_extra.setdefault(key, []).append(np.asarray(arr))
-            assert all(len(v) == i + 1 for v in self.extra.values()), "diagnostics must be given at every record"
             if self.every_step and len(self.times) > self.max_records:
                 self._decimate()
         if snapshot:

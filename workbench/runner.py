@@ -121,7 +121,7 @@ def run(scene=None, *, restart=None, checkpoint=None, progress=None, record_time
     if resume is not None and not sc.values.get("rtol", 0) > 0:
         restarts.check_grid(restart, grid, resume[1], resume[0])
     model = model or sc.model_of()
-    parallel.check(sc, model, restart=restart, checkpoint=checkpoint)
+    parallel.check(sc, model)
     if not parallel.world().parallel:  # (several MPI processes: each holds its part, the serial estimate does not apply)
         preflight.resources(sc, model, len(grid) - 1)
     given = [] if scene is None else [repr(scene if isinstance(scene, str) else getattr(scene, "name", scene))]
@@ -211,8 +211,10 @@ def _run(sc, model, grid, record_times, progress, limit, threads, call, resume=N
             archive so far with the state to go on from, written atomically: a kill leaves the previous one."""
             if n % every or steps.done():  # (the final archive is the caller's to write)
                 return
-            ds = restarts.attach(recorder.dataset(attrs("checkpoint", None, *clock.elapsed())),
-                                 restarts.capture(scheme, steps, recorder))
+            state = restarts.capture(scheme, steps, recorder)  # (several MPI processes: every rank, rank 0 writes)
+            if not world.root:
+                return
+            ds = restarts.attach(recorder.dataset(attrs("checkpoint", None, *clock.elapsed())), state)
             try:
                 results.write(ds, checkpoint)
             except OSError as err:  # a full disk should not stop a long run: say so once, go on
@@ -234,6 +236,5 @@ def _run(sc, model, grid, record_times, progress, limit, threads, call, resume=N
     if failure is not None:
         failure.dataset = ds
         raise failure
-    if world.parallel:  # (rank 0's Dataset, None elsewhere; no restart state: restarts run with one process)
-        return ds
-    return restarts.attach(ds, restarts.capture(scheme, steps, recorder))
+    state = restarts.capture(scheme, steps, recorder)  # (several MPI processes: every rank; rank 0's Dataset)
+    return restarts.attach(ds, state) if world.root else None

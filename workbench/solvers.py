@@ -114,6 +114,7 @@ class AMGConjugateGradient:
     """
 
     name = "cg"
+    warm_start = True  # (the scheme puts its first guess in ``out``)
 
     def __init__(self, K: sp.spmatrix, free: np.ndarray, modes: np.ndarray):
         import pyamg

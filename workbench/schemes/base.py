@@ -80,6 +80,9 @@ class Scheme:
     chatter_watch = False
     #: How many accepted states the history holds (enough for a quadratic predictor).
     keep = 4
+    #: The arrays of :meth:`_extra_state` by what they live on, "dof" or "point" (a contact quadrature point's), for a
+    #: state gathered from several MPI processes into the serial order (:meth:`workbench.parallel.Shell.serial_state`).
+    distributed_layout: dict = {}
 
     def __init__(self, disc):
         self.d = disc

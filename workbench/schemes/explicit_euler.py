@@ -35,6 +35,7 @@ class ExplicitEuler(KelvinVoigtScheme):
     chatter_watch = True  # its unstable contact mode can bounce instead of alternating
     lag = 1.0  # sigma_n uses u_{n-1} = u_n - k v_n
     keep = 0  # no error control, one step: no history of accepted states (a copy of u a step saved)
+    distributed_layout = {"cg_v_old": "dof", "step_limit_normal": "point", "step_limit_tangent": "point"}
 
     def __init__(self, disc):
         super().__init__(disc)
@@ -186,7 +187,7 @@ class ExplicitEuler(KelvinVoigtScheme):
             self.solver.solve(self.rhs_np, self.v_np)
             self.v_np += vc
         else:
-            if self.solver.name == "cg":
+            if getattr(self.solver, "warm_start", False):
                 self._first_guess(k)
             self.solver.solve(self.rhs_np, self.v_np)
         u += k * self.v_np
