@@ -155,6 +155,21 @@ def test_restarts_and_checkpoints_across_process_counts(tmp_path):
             assert _relative(ds[name].values, straight[name].values) < 1e-8, name
 
 
+def test_an_error_on_one_rank_ends_every_rank(tmp_path):
+    """An unexpected error on rank 0 alone (injected in its serial view's setup) while rank 1 waits for it in an
+    exchange: the command prints the traceback, says which rank failed and ends the job with a non-zero code, at once
+    (before, rank 1 waited for ever)."""
+    script = tmp_path / "fail.py"
+    script.write_text("import sys\nimport workbench.parallel as p\norig = p.Shell.__init__\n\n\n"
+                      "def failing(self, d, serial_mesh):\n    if p.world().root:\n"
+                      "        raise RuntimeError('injected on rank 0')\n    orig(self, d, serial_mesh)\n\n\n"
+                      "p.Shell.__init__ = failing\nsys.argv = ['workbench', 'run', 'block', '--h', '0.25', '--T', "
+                      "'0.01', '--no-progress']\nfrom workbench.cli import console\nsys.exit(console())\n")
+    p = subprocess.run([_mpiexec(), "-n", "2", sys.executable, str(script)], capture_output=True, text=True,
+                       env=alone(), timeout=120, cwd=tmp_path)
+    assert p.returncode != 0 and "injected on rank 0" in p.stderr and "rank 0 of 2 failed" in p.stderr, p.stderr
+
+
 def test_a_sweep_is_not_started_on_several_processes(tmp_path):
     """`mpiexec -n 2 workbench study ...` would run the whole sweep on every rank: one `error:` line, exit code 2."""
     cmd = [_mpiexec(), "-n", "2", sys.executable, "-m", "workbench.cli", "study", "tp1", "--k", "0.1", "0.05"]

@@ -459,12 +459,19 @@ def _other_rank() -> bool:
 
 def console() -> int:
     """The ``workbench`` command, a process of its own: one that runs no sweep skips what it does not use
-    (:func:`workbench._lean_process`); ``study`` may send its cases to a dask cluster."""
+    (:func:`workbench._lean_process`); ``study`` may send its cases to a dask cluster. On several MPI processes an
+    unexpected error on one rank ends them all (the others would wait for it in their next exchange)."""
     if sys.argv[1:2] != ["study"]:
         from . import _lean_process
 
         _lean_process()
-    return main()
+    try:
+        return main()
+    except Exception:
+        from .parallel import abort_on_error
+
+        abort_on_error()
+        raise
 
 
 if __name__ == "__main__":  # pragma: no cover

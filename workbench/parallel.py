@@ -35,6 +35,7 @@ from __future__ import annotations
 
 import functools
 import os
+import sys
 
 import numpy as np
 
@@ -117,6 +118,21 @@ def world():
         raise ParameterError(f"started by an MPI launcher with {size} processes, but mpi4py is not installed: "
                              "pip install mpi4py (and an MPI, e.g. pip install mpich)") from None
     return World(MPI.COMM_WORLD) if MPI.COMM_WORLD.size > 1 else SERIAL
+
+
+def abort_on_error() -> None:
+    """In an exception handler on one of several MPI processes: print the traceback and end every rank (MPI_Abort);
+    otherwise nothing. (A Python script gets the same from ``mpiexec -n N python -m mpi4py script.py``.)"""
+    if not world.cache_info().currsize:  # (never asked for: no MPI in this process)
+        return
+    w = world()
+    if not w.parallel:
+        return
+    import traceback
+
+    traceback.print_exc()
+    print(f"error: rank {w.rank} of {w.size} failed (above); ending every rank", file=sys.stderr, flush=True)
+    w.comm.Abort(1)
 
 
 def check(scene, model) -> None:
