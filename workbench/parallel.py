@@ -71,10 +71,6 @@ class Serial:
     def sum(value) -> float:
         return value
 
-    @staticmethod
-    def bcast(obj):
-        return obj
-
 
 SERIAL = Serial()
 
@@ -281,8 +277,8 @@ class Shell:
         plans = comm.gather((numbers, edges), root=0)
         serial_dofs = None
         if self.w.root:
-            edge_of = {tuple(sorted(v.nr for v in e.vertices)): e.nr for e in shell.mesh.edges} if len(edges) or \
-                any(len(e) for _, e in plans) else {}
+            edge_of = ({tuple(sorted(v.nr for v in e.vertices)): e.nr for e in shell.mesh.edges}
+                       if d.scene["order"] > 1 else {})
             serial_dofs = []
             for nums, edg in plans:
                 te = (np.array([shell.fes.GetDofNrs(ngs.NodeId(ngs.EDGE, edge_of[tuple(p)])) for p in edg],

@@ -189,26 +189,25 @@ class DistributedSolver:
     def precondition(self, r: np.ndarray) -> np.ndarray:
         """The preconditioner (BDDC; ``cg`` only) applied to this rank's part of a residual: an approximate K_A^-1 r,
         cumulated (the step limit's LOBPCG, :func:`workbench.stability.lobpcg_smallest`)."""
+        self.x.data = self.pre.mat * self._distributed(r)
+        return self.x.FV().NumPy().copy()
+
+    def _distributed(self, r: np.ndarray):
+        """``self.b`` holding this rank's part of ``r`` (zero on the Dirichlet dofs), marked distributed."""
         from .parallel import status
 
         b = self.b.FV().NumPy()
         b[:] = r
         b[self.fixed] = 0.0
         status(self.b, distributed=True)
-        self.x.data = self.pre.mat * self.b
-        return self.x.FV().NumPy().copy()
+        return self.b
 
     def solve(self, rhs: np.ndarray, out: np.ndarray) -> None:
-        from .parallel import status
-
-        b = self.b.FV().NumPy()
-        b[:] = rhs
-        b[self.fixed] = 0.0
-        status(self.b, distributed=True)
+        b = self._distributed(rhs)
         if self.name != "cg":
-            self.x.data = self.inv * self.b
+            self.x.data = self.inv * b
         else:
-            self.inv.Solve(rhs=self.b, sol=self.x)
+            self.inv.Solve(rhs=b, sol=self.x)
             self.last_iterations = self.inv.iterations
             if self.inv.residuals and self.inv.residuals[-1] > self.inv._final_residual:
                 from .errors import Diverged
