@@ -43,14 +43,14 @@ LAYERS = [
     ("paper", {"paper"}),
     ("study", {"study"}),
     ("references", {"references"}),
-    ("running", {"running", "runner", "restart", "parallel"}),
+    ("running", {"running", "runner", "restart", "parallel", "preflight"}),
     ("output", {"output", "results", "plotting", "vtk", "files"}),
     ("schemes", {"schemes"}),
     ("discretisation", {"discrete", "discretisation", "boundary", "condensation", "solvers", "stability", "eigen",
-                        "transfer", "world", "preflight"}),
+                        "transfer", "world"}),
     ("scene input", {"input", "scenes", "geometry", "meshes", "models", "numerics"}),
     ("physics", {"physics"}),
-    ("base", {"parameters", "expressions", "errors", "threads", "__init__"}),
+    ("base", {"parameters", "values", "expressions", "errors", "threads", "__init__"}),
 ]
 
 

@@ -32,7 +32,7 @@ from pathlib import Path
 
 import numpy as np
 
-from workbench.parallel import alone
+from workbench.world import alone
 
 ROOT = Path(__file__).resolve().parent.parent
 

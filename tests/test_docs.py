@@ -15,7 +15,7 @@ from pathlib import Path
 
 import pytest
 
-from workbench.parallel import alone
+from workbench.world import alone
 
 ROOT = Path(__file__).resolve().parents[1]
 PAGES = [ROOT / "README.md"] + sorted((ROOT / "docs").glob("*.md"))

@@ -22,8 +22,6 @@ import os
 import sys
 import warnings
 
-import numpy as np
-
 from .errors import ParameterError
 
 EXIT_BAD_INPUT, EXIT_DIVERGED, EXIT_NOT_WRITTEN = 2, 3, 4
@@ -92,11 +90,6 @@ def _threads(value):
     if value is not None and value < 1:
         raise ParameterError(f"--threads {value}: give an integer >= 1 (NGSolve TaskManager threads)")
     return value
-
-
-def write_or_keep(ds, path) -> int:
-    """Write ``ds``; if that fails (a full disk), keep it in the temporary folder and say where. Exit code."""
-    return _write_or_keep(ds, path)[0]
 
 
 def _write_or_keep(ds, path=None):
@@ -265,6 +258,8 @@ def _reference(text):
 
 def cmd_study(args) -> int:
     from pathlib import Path
+
+    import numpy as np
 
     from .study import Study
 
@@ -459,12 +454,12 @@ def _other_rank() -> bool:
 
 def console() -> int:
     """The ``workbench`` command, a process of its own: one that runs no sweep skips what it does not use
-    (:func:`workbench._lean_process`); ``study`` may send its cases to a dask cluster. On several MPI processes an
+    (:func:`workbench.threads.lean_process`, first: the module imports nothing heavy); ``study`` may send its cases to a dask cluster. On several MPI processes an
     unexpected error on one rank ends them all (the others would wait for it in their next exchange)."""
     if sys.argv[1:2] != ["study"]:
-        from . import _lean_process
+        from .threads import lean_process
 
-        _lean_process()
+        lean_process()
     try:
         return main()
     except Exception:

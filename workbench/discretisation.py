@@ -26,11 +26,11 @@ from functools import cached_property
 import ngsolve as ngs
 import numpy as np
 
-from . import parallel
+from . import numerics as numerics_of
 from .boundary import ContactSide
-from .parallel import SERIAL
 from .physics import kelvin_voigt
 from .physics.ops import NGS
+from .world import SERIAL
 
 
 def stiffness(fes, tensor, dim: int, preconditioner: str | None = None) -> ngs.BilinearForm:
@@ -52,7 +52,13 @@ class Discretisation:
     ----------
     model : ModelA or ModelB
     scene : Scene
-        For its discretisation values (h, order, solver, probes) and its name.
+        For its probes, snapshots and name.
+    numerics : workbench.numerics.Numerics
+        The element order, the solver and the scheme's options.
+    world : workbench.world.Serial
+        The processes that hold the body (one: :data:`workbench.world.SERIAL`; a body distributed over MPI
+        processes is a :class:`workbench.parallel.DistributedDiscretisation`, which overrides the methods of the
+        section "where the data lives" below).
     geometry : workbench.geometry.Geometry
     mesh, fes : the mesh and the displacement space (H1 in 1D, VectorH1 otherwise)
     t : ngsolve.Parameter
@@ -74,16 +80,17 @@ class Discretisation:
         Model B: w_i = int_Gamma3 phi_i da at the contact vertices.
     """
 
-    def __init__(self, model, scene, mesh, fes, world=SERIAL):
+    world = SERIAL
+
+    def __init__(self, model, scene, mesh, fes, numerics=None):
         self.model, self.scene, self.geometry = model, scene, model.geometry
-        self.world = world  # (several MPI processes: this rank's part of the body, workbench.parallel)
-        self.shell = None  # (several processes, on rank 0: the serial view that records, workbench.parallel.Shell)
+        self.numerics = numerics or numerics_of.from_scene(scene)
         self.mesh, self.fes = mesh, fes
         self.dim = self.geometry.dim
         self.contact_name = self.geometry.boundaries["contact"]
         self.t = ngs.Parameter(0.0)
         self.u, self.v = ngs.GridFunction(fes, "u"), ngs.GridFunction(fes, "velocity")
-        self.viscous = self.elastic = self.viscous_pre = None
+        self.viscous = self.elastic = None
         self.side = self.rate_side = self.beta = None
         self.beta_dofs = self.facet_measure = self.facet_xyz = None
         self.memory, self.memory_kind, self.contact_weights = [], "none", None
@@ -94,6 +101,45 @@ class Discretisation:
     @property
     def ndof(self) -> int:
         return self.fes.ndof
+
+    # -- where the data lives (one process here; a distributed body overrides these) -------------------------------
+    @property
+    def ndof_global(self) -> int:
+        """The dofs of the whole body (on several processes: of the serial run)."""
+        return self.ndof
+
+    def owned(self):
+        """True at the dofs whose sums this process counts (each shared dof once over the processes); None: all."""
+        return None
+
+    def viscous_solver(self, iterative: bool = True):
+        """K_A factored (or, ``iterative`` and in 3D beyond the factor's memory, solved by AMG-preconditioned CG) with
+        the scene's ``solver`` (:func:`workbench.solvers.choose`)."""
+        from . import solvers
+
+        method = solvers.choose(self.numerics.solver, self.dim, self.ndof, iterative=iterative)
+        return solvers.factor(self.viscous.mat, self.fes.FreeDofs(), self.u.vec, method, fes=self.fes)
+
+    def springs(self, solver):
+        """The operators of the body on boundary springs with K_A solved by ``solver``: the explicit scheme's step
+        limit (:class:`workbench.eigen.SpringOperators`)."""
+        from .eigen import SpringOperators
+
+        return SpringOperators(self, solver)
+
+    def gather_state(self, state: dict, layout: dict):
+        """A scheme's state in the order of the whole body (:meth:`workbench.schemes.base.Scheme.state`; ``layout``:
+        where its extra arrays live), on the process that records (None on the others)."""
+        return state
+
+    def scatter_state(self, state: dict, layout: dict) -> dict:
+        """This process's part of a state in the order of the whole body (:meth:`gather_state`)."""
+        return state
+
+    def recording(self, make):
+        """The recorder of a run, ``make(disc)`` for the discretisation that records (on several processes: rank 0's
+        serial view, fed with the gathered states)."""
+        return make(self)
 
     def _index_arrays(self) -> None:
         """Vertex/contact-node dof tables, Dirichlet dofs and probe points."""
@@ -171,25 +217,6 @@ class Discretisation:
         return np.nonzero(~free[self.normal_dofs])[0]
 
     @cached_property
-    def _node_facets(self):
-        """The facet-to-vertex averaging matrix (by facet measure) of the contact side."""
-        import scipy.sparse as sp
-
-        index = {int(v): i for i, v in enumerate(self.vertex_numbers)}
-        rows, cols, vals = [], [], []
-        for j, el in enumerate(self.mesh.Boundaries(self.contact_name).Elements()):
-            for v in el.vertices:
-                rows.append(index[v.nr])
-                cols.append(j)
-                vals.append(self.facet_measure[j])
-        A = sp.csr_matrix((vals, (rows, cols)), shape=(len(index), len(self.facet_measure)))
-        return sp.diags(1.0 / np.asarray(A.sum(axis=1)).ravel()) @ A
-
-    def node_average(self, facet_values: np.ndarray) -> np.ndarray:
-        """Facet values (in facet order) averaged at the contact vertices by the measures of the adjacent facets."""
-        return self._node_facets @ facet_values
-
-    @cached_property
     def probe_operator(self):
         """P with P u = u at the probe points, (probe, component) flattened: a point value is linear in the dofs of
         the cell that holds the point, so P is taken once through their unit vectors (a record then costs one small
@@ -239,14 +266,17 @@ class Discretisation:
         return [b.tocsr() for b in blocks]
 
     @cached_property
+    def cells(self) -> np.ndarray:
+        """The vertices (0-based) of every cell, shape (cell, dim + 1)."""
+        return mesh_cells(self.mesh, self.dim)
+
+    @cached_property
     def edges(self):
         """(edge vertex pairs, their midpoints as mesh points): where a field of order >= 2 is recorded beside the
         vertices, so that its quadratic part survives in the archive (and in VTK)."""
         from itertools import combinations
 
-        from .results import mesh_cells
-
-        cells = mesh_cells(self.mesh, self.dim)
+        cells = self.cells
         pairs = np.sort(np.concatenate([cells[:, [a, b]] for a, b in combinations(range(self.dim + 1), 2)]), axis=1)
         pairs = np.unique(pairs, axis=0)
         mid = self.vertex_xyz[pairs].mean(axis=1)
@@ -262,14 +292,10 @@ class Discretisation:
         return np.stack([E @ u for E in self.strain_operator], axis=1)
 
     # -- Model A's contact side ---------------------------------------------------------------------------------
-    def beta_at_points(self, beta_facets: np.ndarray) -> np.ndarray:
-        """The bonding field (per facet) at the force quadrature points."""
-        return beta_facets[self.side.element]
-
     @cached_property
     def contact_form(self):
         """The NGSolve LinearForm of j(beta, u, .) at the current u and beta (the definition; None without terms)."""
-        contact = getattr(self.model, "contact", None)
+        contact = self.model.contact
         if not contact:
             return None
         w = self.fes.TestFunction()
@@ -288,7 +314,7 @@ class Discretisation:
     @cached_property
     def rate_form(self):
         """The NGSolve LinearForm of the bonding rate tested with the facet indicators (None without adhesion)."""
-        bonding = getattr(self.model, "bonding", None)
+        bonding = self.model.bonding
         if bonding is None:
             return None
         q = self.beta.space.TestFunction()
@@ -306,21 +332,19 @@ class Discretisation:
         return u_nu, ngs.CF(tuple(u[a] for a in g.facet_axes))
 
 
-def _vector_space(geometry, mesh, order):
+def mesh_cells(mesh, dim):
+    """Vertex indices (0-based) of every cell of an NGSolve mesh, shape (cell, dim + 1)."""
+    ngm = mesh.ngmesh
+    elems = {1: ngm.Elements1D, 2: ngm.Elements2D, 3: ngm.Elements3D}[dim]().NumPy()
+    return np.array(elems["nodes"][:, : dim + 1], dtype=np.int64) - 1
+
+
+def vector_space(geometry, mesh, order):
+    """The displacement space of order ``order`` with the body's Dirichlet conditions (H1 in 1D, VectorH1 otherwise)."""
     flags = geometry.dirichlet_flags()
     if geometry.dim == 1:
         return ngs.H1(mesh, order=order, **flags)
     return ngs.VectorH1(mesh, order=order, **flags)
-
-
-def _vertex_wirebasket(fes, dim: int, nv: int) -> None:
-    """BDDC's coarse problem on the vertex dofs only: every other dof (P2: the edges') an interface dof. With the
-    default wirebasket, vertices and edges, the coarse problem of P2 is the whole system, factored on rank 0 (the P2
-    block at 271k dofs on 3 processes: 5.1 GB on rank 0, 2 CG iterations); with the vertices alone rank 0 holds
-    0.6 GB and every rank under 1 GB, at 77 iterations (studies/bench_mpi.py)."""
-    per = fes.ndof // dim  # (each component's block: its vertex dofs first)
-    for c in range(dim):
-        fes.SetCouplingType(ngs.IntRange(c * per + nv, (c + 1) * per), ngs.COUPLING_TYPE.INTERFACE_DOF)
 
 
 def _vertex_dofs(fes, dim, nv):
@@ -446,8 +470,10 @@ def bonding_space(mesh, dim: int, name: str):
     return space, dofs, m[dofs], np.stack(xyz, axis=1)
 
 
-def build(model_or_scene, scene=None) -> Discretisation:
-    """Assemble the constant parts of a model on its mesh (a Scene is turned into its model first).
+def build(model_or_scene, scene=None, numerics=None) -> Discretisation:
+    """Assemble the constant parts of a model on its mesh (a Scene is turned into its model first; ``numerics``:
+    :func:`workbench.numerics.from_scene` by default). One process: a body distributed over MPI processes is built by
+    :func:`workbench.parallel.discretise`.
 
     Examples
     --------
@@ -462,65 +488,51 @@ def build(model_or_scene, scene=None) -> Discretisation:
         scene, model = model_or_scene, model_or_scene.model_of()
     else:
         model = model_or_scene
-    geometry = model.geometry
-    w = parallel.world()
-    if w.parallel:  # this rank's part of the body; rank 0 keeps the serial mesh for its shell
-        mesh, serial_mesh = parallel.distribute(geometry)
-    else:
-        mesh = geometry.mesh()
-    fes = _vector_space(geometry, mesh, scene["order"])
-    if parallel.conjugate_gradients(scene):
-        _vertex_wirebasket(fes, geometry.dim, mesh.nv)
-    d = Discretisation(model, scene, mesh, fes, w)
-    if model.kind == "B":
-        _memory_parts(d)
-    else:
-        _kelvin_voigt_parts(d)
-    if w.parallel:
-        d.shell = parallel.Shell(d, serial_mesh)
+    numerics = numerics or numerics_of.from_scene(scene)
+    mesh = model.geometry.mesh()
+    d = Discretisation(model, scene, mesh, vector_space(model.geometry, mesh, numerics.order), numerics)
+    assemble(d)
     return d
 
 
-def serial_shell(model, scene, mesh) -> Discretisation:
-    """The tables of a discretisation on the serial ``mesh`` without its matrices: what rank 0 of a distributed run
-    records through (:class:`workbench.parallel.Shell`)."""
-    d = Discretisation(model, scene, mesh, _vector_space(model.geometry, mesh, scene["order"]))
-    _kelvin_voigt_parts(d, matrices=False)
-    return d
-
-
-def _kelvin_voigt_parts(d: Discretisation, matrices: bool = True) -> None:
+def assemble(d: Discretisation, matrices: bool = True, preconditioner: str | None = None) -> None:
+    """The constant parts of the terms the model declares, and no others: the stiffness of each tensor (the elastic
+    one, the viscous one of a Kelvin-Voigt body, those of a relaxation kernel), the contact side where contact laws
+    act, the bonding field where a bonding law does, the contact vertices' weights where a layer constrains them,
+    and the initial displacement. ``matrices=False``: the tables only (the serial view of a distributed body);
+    ``preconditioner``: K_A assembled with NGSolve's preconditioner of that name (``d.viscous_pre``)."""
     m = d.model
-    if matrices:  # (several processes: K_A with the BDDC preconditioner of the conjugate gradients)
-        if parallel.conjugate_gradients(d.scene):
-            d.viscous, d.viscous_pre = stiffness(d.fes, m.viscous, d.dim, "bddc")
-        else:
+    if matrices:
+        if m.viscous is not None and preconditioner is not None:
+            d.viscous, d.viscous_pre = stiffness(d.fes, m.viscous, d.dim, preconditioner)
+        elif m.viscous is not None:
             d.viscous = stiffness(d.fes, m.viscous, d.dim)
         d.elastic = stiffness(d.fes, m.elastic, d.dim)
+        if m.memory is not None:
+            _memory_parts(d)
     if m.contact or m.bonding is not None:
-        d.side = ContactSide(d.fes, d.contact_name, d.geometry, rule=d.scene["order"])
+        d.side = ContactSide(d.fes, d.contact_name, d.geometry, rule=d.numerics.order)
     if m.bonding is not None:
         d.rate_side = ContactSide(d.fes, d.contact_name, d.geometry, rule=0)
         space, d.beta_dofs, d.facet_measure, d.facet_xyz = bonding_space(d.mesh, d.dim, d.contact_name)
         d.beta = ngs.GridFunction(space, "beta")
         d.beta.vec.FV().NumPy()[d.beta_dofs] = m.beta0
-    if m.loads.u0 is not None:  # Model A's initial condition (Model B solves for u(0))
+    if m.layer is not None:
+        d.contact_weights = d.node_weights
+    if m.loads.u0 is not None:  # an initial condition (a quasistatic model solves for u(0) instead)
         d.u.Set(m.loads.u0.cf())
 
 
 def _memory_parts(d: Discretisation) -> None:
-    """Model B: the elastic stiffness K_A, the memory stiffnesses and the nodal contact weights."""
+    """The stiffnesses of a relaxation kernel."""
     m = d.model
-    d.elastic = stiffness(d.fes, m.elastic, d.dim)
-    if m.memory is not None:
-        d.memory_kind = m.memory.kind
-        if m.memory.kind == "prony" and m.memory.base is not None:
-            # a fitted kernel: C_i = c_i C, so one stiffness serves all terms (and one matvec per step)
-            K = stiffness(d.fes, m.memory.base[0], d.dim)
-            d.memory = [(K, C, tau) for C, tau in m.memory.terms]
-            d.memory_scale = list(m.memory.base[1])
-        elif m.memory.kind == "prony":
-            d.memory = [(stiffness(d.fes, C, d.dim), C, tau) for C, tau in m.memory.terms]
-        else:
-            d.memory = [(stiffness(d.fes, m.memory.tensor, d.dim), m.memory.tensor, m.memory.shape)]
-    d.contact_weights = d.node_weights
+    d.memory_kind = m.memory.kind
+    if m.memory.kind == "prony" and m.memory.base is not None:
+        # a fitted kernel: C_i = c_i C, so one stiffness serves all terms (and one matvec per step)
+        K = stiffness(d.fes, m.memory.base[0], d.dim)
+        d.memory = [(K, C, tau) for C, tau in m.memory.terms]
+        d.memory_scale = list(m.memory.base[1])
+    elif m.memory.kind == "prony":
+        d.memory = [(stiffness(d.fes, C, d.dim), C, tau) for C, tau in m.memory.terms]
+    else:
+        d.memory = [(stiffness(d.fes, m.memory.tensor, d.dim), m.memory.tensor, m.memory.shape)]

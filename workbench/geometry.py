@@ -24,9 +24,14 @@ Examples
 """
 from __future__ import annotations
 
+import functools
 from typing import TYPE_CHECKING
 
 from .errors import ParameterError
+
+#: How many meshes (read from files, or of the Hertz bodies) a process keeps for reuse: a sweep over h meets each
+#: mesh again for its reference and comparisons; an unbounded cache grew with every size a session tried.
+MESH_CACHE = 8
 
 if TYPE_CHECKING:  # NGSolve is imported where a mesh is made: a scene is checked without it
     import ngsolve as ngs
@@ -126,9 +131,9 @@ class Geometry:
 
         return np.asarray(xyz, dtype=float)[..., self.normal_axis].copy()
 
-    def warnings(self, values: dict) -> list:
-        """Messages about this body for these values (warned before a run)."""
-        return []
+    #: The radius of the refined zone of the curved contact side around its apex (a Hertz body), beyond which the
+    #: side is free; None for a body whose whole contact side can touch.
+    zone_radius = None
 
     def tractions(self, values: dict) -> dict:
         """The traction expressions by boundary name (the scene's ``traction_SIDE`` values)."""
@@ -354,21 +359,23 @@ class MeshBody3D(MeshBody):
     kind, dim = "mesh3d", 3
 
 
-_MESHES: dict = {}
-
-
 def _read_mesh(path, digest):
-    """The netgen mesh of a file, read once per process (keyed by the file's content)."""
+    """The netgen mesh of a file, read once per process while it is among the last few used (keyed by the file's
+    content)."""
     from . import meshes
 
-    key = (path, digest or meshes.digest(path))
-    if key not in _MESHES:
-        _MESHES[key] = meshes.read(path)
-    return _MESHES[key]
+    return _cached_mesh(path, digest or meshes.digest(path))
+
+
+@functools.lru_cache(maxsize=MESH_CACHE)
+def _cached_mesh(path, digest):
+    from . import meshes
+
+    return meshes.read(path)
 
 
 def _closest(name, known):
-    from .parameters import closest_name
+    from .values import closest_name
 
     return closest_name(name, known)
 
@@ -430,26 +437,9 @@ class _Indenter(Geometry):
     def key(self):
         return (self.kind, self.extent, self.h, self.h_contact, self.contact_zone)
 
-    def warnings(self, values):
-        """Hertz's contact radius for the largest load near the edge of the contact zone (beyond it the side is free,
-        so a contact reaching it is cut off)."""
-        import numpy as np
-
-        from .references import hertz
-
-        if "E" not in values or "load" not in values:
-            return []
-        P = max(float(values["load"](t=t)) for t in np.linspace(0.0, values["T"], 101))
-        if P <= 0:
-            return []
-        R = self.extent[0]
-        a = (hertz.cylinder if self.dim == 2 else hertz.sphere)(P, R, values["E"], values["nu"])[0]
-        zone = self.contact_zone * R
-        if a <= 0.8 * zone:
-            return []
-        return [f"load = {P:g} gives Hertz's contact radius a = {a:.3g} m, near or beyond the contact zone (the part "
-                f"of the curved side within {zone:.3g} m of the apex, refined, that can touch the foundation): reduce "
-                "the load, or increase contact_zone or radius"]
+    @property
+    def zone_radius(self) -> float:
+        return self.contact_zone * self.extent[0]
 
     def nested_in(self, finer):
         return False
@@ -504,9 +494,6 @@ class Hemisphere(_Indenter):
         return {"top": parse(f"(0, 0, -({values['load'].source}) / {area!r})", name="load", size=3)}
 
 
-_INDENTERS: dict = {}
-
-
 #: The zone around the apex (the default of the scene parameter ``contact_zone``): the contact side within
 #: CONTACT_ZONE R of it is meshed with h_contact, the body beneath it (CONTACT_ZONE R wide, half that deep) with
 #: ZONE_FACTOR h_contact; the mesh is graded to h beyond.
@@ -518,12 +505,10 @@ _INDENTERS: dict = {}
 CONTACT_ZONE, ZONE_FACTOR = 0.3, 4.0
 
 
+@functools.lru_cache(maxsize=MESH_CACHE)
 def _indenter_mesh(kind, R, h, h_contact, contact_zone=CONTACT_ZONE):
     """The netgen mesh of a Hertz body (OCC), refined in the contact zone (``contact_zone`` R around the apex); made
-    once per process and size."""
-    key = (kind, R, h, h_contact, contact_zone)
-    if key in _INDENTERS:
-        return _INDENTERS[key]
+    once per process and size while it is among the last few used."""
     import math
 
     from netgen.occ import Z, ArcOfCircle, Box, Cylinder, Face, Glue, MoveTo, OCCGeometry, Pnt, Segment, Sphere, Wire
@@ -581,9 +566,7 @@ def _indenter_mesh(kind, R, h, h_contact, contact_zone=CONTACT_ZONE):
         if abs(p.x) < tol and abs(p.y) < tol and abs(p.z) < tol:
             v.name = "apex"
     geo = OCCGeometry(shape, dim=2) if kind == "halfdisc" else OCCGeometry(shape)
-    mesh = geo.GenerateMesh(maxh=h, grading=0.25)
-    _INDENTERS[key] = mesh
-    return mesh
+    return geo.GenerateMesh(maxh=h, grading=0.25)
 
 
 #: The built-in geometries by name.

@@ -1,10 +1,16 @@
-"""From a scene to its model: typed physics objects, built once. The only place that reads physics keys.
+"""From a scene to its model: typed physics objects, built once.
 
 A scene is checked values (:mod:`workbench.scenes`); a model is what those values
 mean: the body (:mod:`workbench.geometry`), the material tensors, the contact
 terms and the bonding law (Model A), or the relaxation kernel and the compliant
 layer (Model B), and the loads. Discretisation, schemes, the stability estimate
-and the condensed Newton take these objects, never the scene's physics values.
+and the condensed Newton take these objects, never the scene's physics values
+(the contact laws read their own values, :mod:`workbench.physics.laws`).
+
+Both models answer one interface, :class:`Model`: each has every part, and a part a
+model does not have is None (or an empty :class:`~workbench.physics.contact.Contact`),
+so that the code downstream assembles and steps what is declared and never asks
+which model it has.
 
 Examples
 --------
@@ -18,7 +24,9 @@ Examples
 from __future__ import annotations
 
 from dataclasses import dataclass, field
+from typing import ClassVar, Protocol
 
+from .numerics import schemes_of
 from .physics import kelvin_voigt
 from .physics.contact import Contact
 from .physics.laws import LAWS
@@ -39,6 +47,40 @@ class Loads:
     u0: object = None  # rod, Model A: the initial displacement
 
 
+class Model(Protocol):
+    """What every model declares (module docs).
+
+    Attributes
+    ----------
+    kind : str
+        Its letter as scenes and archives name it ("A", "B").
+    schemes : tuple of str
+        The time schemes that step it (:data:`workbench.numerics.SCHEMES`).
+    geometry, loads
+        The body and its loads.
+    elastic : tensor
+        The instantaneous elastic tensor (Model A: G; Model B: A).
+    viscous : tensor or None
+        A Kelvin-Voigt body's viscous tensor (strain rate to stress).
+    contact : Contact
+        The contact laws on the contact side (empty: none).
+    bonding : BondingLaw or None
+        The bonding field's law, with beta0 its initial value.
+    memory : Prony, GeneralKernel or None
+        A relaxation kernel (long memory).
+    layer : Layer or None
+        A unilateral constraint with a compliant layer at the contact vertices.
+    terms : tuple of str
+        The names of the terms it has (a run records them).
+    """
+
+    kind: ClassVar[str]
+    schemes: ClassVar[tuple]
+
+    def max_order(self, dim: int) -> int:
+        """The highest element order it runs in ``dim`` dimensions."""
+
+
 @dataclass(frozen=True)
 class ModelA:
     """Kelvin–Voigt body with normal compliance and adhesion (Chau, Fernández, Shillor, Sofonea 2003)."""
@@ -50,12 +92,18 @@ class ModelA:
     bonding: object  # BondingLaw or None
     beta0: float
     loads: Loads
-    kind = "A"
-    schemes = ("explicit", "implicit")
+    memory: ClassVar = None
+    layer: ClassVar = None
+    kind: ClassVar[str] = "A"
+    schemes: ClassVar[tuple] = schemes_of("A")
 
     @property
     def terms(self) -> tuple:
         return self.contact.names
+
+    @staticmethod
+    def max_order(dim: int) -> int:
+        return 4
 
     def stress(self, u, v, eps):
         """sigma = A eps(v) + G eps(u) as a coefficient function (``eps`` maps a field to its strain)."""
@@ -71,12 +119,26 @@ class ModelB:
     memory: object  # Prony, GeneralKernel or None
     layer: Layer
     loads: Loads
-    kind = "B"
-    schemes = ("vi",)
+    viscous: ClassVar = None
+    contact: ClassVar[Contact] = Contact(())
+    bonding: ClassVar = None
+    beta0: ClassVar[float] = 1.0
+    kind: ClassVar[str] = "B"
+    schemes: ClassVar[tuple] = schemes_of("B")
 
     @property
     def terms(self) -> tuple:
         return ("unilateral",) + (("memory",) if self.memory is not None else ())
+
+    @staticmethod
+    def max_order(dim: int) -> int:
+        """The constraint and the layer's law act at the contact nodes: P1, or P2 in 2D (vertices and facet
+        midpoints)."""
+        return 2 if dim == 2 else 1
+
+
+#: The models by their letter.
+MODELS = {"A": ModelA, "B": ModelB}
 
 
 def _tensor(v, dim, E="E", nu="nu", voigt="elastic_tensor"):
@@ -125,11 +187,21 @@ def from_scene(scene):
 
     v = scene.values
     geometry = GEOMETRIES[scene.geometry].from_values(v)
+    return _BUILDERS[scene.model](v, geometry)
+
+
+def _model_a(v, geometry) -> ModelA:
     dim = geometry.dim
-    if scene.model == "B":
-        elastic = kelvin_voigt.Scalar(v["a"]) if dim == 1 else _tensor(v, dim)
-        return ModelB(geometry, elastic, _memory(v, dim, v["T"]), Layer(v["F"], v["c"], v["gap"]), _loads(v, geometry))
     elastic = kelvin_voigt.Scalar(v["a"]) if dim == 1 else _tensor(v, dim)
     terms = [t for law in LAWS if (t := law.from_values(v)) is not None]
     return ModelA(geometry, _viscous(v, dim), elastic, Contact(terms), bonding_law(v), v["beta0"],
                   _loads(v, geometry))
+
+
+def _model_b(v, geometry) -> ModelB:
+    dim = geometry.dim
+    elastic = kelvin_voigt.Scalar(v["a"]) if dim == 1 else _tensor(v, dim)
+    return ModelB(geometry, elastic, _memory(v, dim, v["T"]), Layer(v["F"], v["c"], v["gap"]), _loads(v, geometry))
+
+
+_BUILDERS = {"A": _model_a, "B": _model_b}

@@ -17,195 +17,9 @@ workbench.errors.ParameterError: nu = 0.5 is outside the allowed range -1 < nu <
 """
 from __future__ import annotations
 
-import difflib
-import json
-import math
-from dataclasses import dataclass
-
-from .errors import ParameterError
-from .expressions import Expression, ExpressionError, parse
-from .schemes import REGISTRY as SCHEME_REGISTRY
-
-
-@dataclass(frozen=True)
-class Param:
-    """One parameter.
-
-    ``kind`` is one of ``float``, ``int``, ``flag``, ``choice``, ``expr``
-    (scalar expression), ``vector`` (vector expression, size set by the
-    geometry), ``points`` (a list of coordinate tuples), ``times`` (a list of
-    times) or ``matrix`` (a square matrix of numbers, empty when not given). ``lower``/``upper`` bound numbers; ``*_open`` says whether the bound
-    itself is excluded.
-    """
-
-    name: str
-    default: object
-    unit: str
-    meaning: str
-    kind: str = "float"
-    lower: float | None = None
-    upper: float | None = None
-    lower_open: bool = False
-    upper_open: bool = False
-    choices: tuple = ()
-    variables: tuple = ("x", "y", "z", "t")
-
-    def range_text(self) -> str:
-        """The allowed range in words, for messages and ``workbench show``."""
-        if self.kind == "choice":
-            return " | ".join(repr(c) for c in self.choices)
-        if self.kind == "flag":
-            return "true | false"
-        if self.kind in ("expr", "vector"):
-            return "expression in " + ", ".join(self.variables)
-        if self.kind == "text":
-            return "text"
-        if self.kind == "mapping":
-            return "a table name = role"
-        if self.lower is None and self.upper is None:
-            return "any finite number" if self.kind in ("float", "int") else ""
-        parts = []
-        if self.lower is not None:
-            parts.append(f"{_fmt(self.lower)} {'<' if self.lower_open else '<='}")
-        parts.append(self.name)
-        if self.upper is not None:
-            parts.append(f"{'<' if self.upper_open else '<='} {_fmt(self.upper)}")
-        return " ".join(parts)
-
-    def check(self, value, size: int | None = None):
-        """Coerce ``value`` to this parameter's kind and check its range."""
-        name = self.name
-        if self.kind in ("float", "int"):
-            if isinstance(value, str):
-                try:
-                    value = float(value.strip())
-                except ValueError:
-                    raise ParameterError(f"{name} = {value!r} is not a number") from None
-            if isinstance(value, bool) or not isinstance(value, (int, float)) and not hasattr(value, "__float__"):
-                raise ParameterError(f"{name} = {value!r} is not a number")
-            value = float(value)
-            if not math.isfinite(value):
-                raise ParameterError(f"{name} = {value} is not finite; allowed: {self.range_text()}")
-            if self.kind == "int":
-                if value != int(value):
-                    raise ParameterError(f"{name} = {value} must be an integer; allowed: {self.range_text()}")
-                value = int(value)
-            lo, hi = self.lower, self.upper
-            bad_lo = lo is not None and (value <= lo if self.lower_open else value < lo)
-            bad_hi = hi is not None and (value >= hi if self.upper_open else value > hi)
-            if bad_lo or bad_hi:
-                raise ParameterError(f"{name} = {_fmt(value)} is outside the allowed range {self.range_text()}")
-            return value
-        if self.kind == "flag":
-            if isinstance(value, str):
-                low = value.strip().lower()
-                if low in ("1", "true", "yes", "on"):
-                    return True
-                if low in ("0", "false", "no", "off"):
-                    return False
-            elif isinstance(value, (bool, int)) and value in (0, 1):
-                return bool(value)
-            raise ParameterError(f"{name} = {value!r} is not a flag; allowed: true | false")
-        if self.kind == "choice":
-            if value in self.choices:
-                return value
-            hint = difflib.get_close_matches(str(value), [str(c) for c in self.choices], n=1)
-            extra = f"; did you mean {hint[0]!r}?" if hint else ""
-            raise ParameterError(f"{name} = {value!r} is not allowed; choose one of {self.range_text()}{extra}")
-        if self.kind in ("expr", "vector"):
-            try:
-                return parse(value, name=name, allowed=self.variables,
-                             size=(1 if self.kind == "expr" else size))
-            except ExpressionError as err:
-                raise ParameterError(str(err)) from None
-        if self.kind == "points":
-            return _points(name, value)
-        if self.kind == "times":
-            return _times(name, value)
-        if self.kind == "matrix":
-            return _matrix(name, value)
-        if self.kind == "text":
-            if not isinstance(value, str):
-                raise ParameterError(f"{name} = {value!r}: give text (a file path)")
-            return value
-        if self.kind == "mapping":
-            return _mapping(name, value)
-        raise AssertionError(self.kind)
-
-
-def _fmt(v) -> str:
-    return f"{v:g}" if isinstance(v, float) else str(v)
-
-
-def _points(name, value):
-    if isinstance(value, str):
-        text = value.strip()
-        try:
-            value = json.loads(text)
-        except json.JSONDecodeError:
-            # "(1, 0.1); (0.5, 0)" on the command line
-            try:
-                value = [[float(c) for c in p.strip().strip("()[]").split(",") if c.strip()]
-                         for p in text.split(";") if p.strip()]
-            except ValueError:
-                raise ParameterError(f"{name} = {text!r}: give points as '(x, y); (x, y)' or a JSON list") from None
-    try:
-        pts = tuple(tuple(float(c) for c in (p if isinstance(p, (list, tuple)) else [p])) for p in value)
-    except (TypeError, ValueError):
-        raise ParameterError(f"{name} = {value!r}: expected a list of coordinate tuples") from None
-    if any(not math.isfinite(c) for p in pts for c in p):
-        raise ParameterError(f"{name}: coordinates must be finite")
-    return pts
-
-
-def _times(name, value):
-    if isinstance(value, str):  # "0.1, 0.2", or as `workbench show` prints a list: "[0.1, 0.2]"
-        value = [v for v in value.strip().strip("[]()").replace(";", ",").split(",") if v.strip()]
-    try:
-        ts = tuple(float(v) for v in (value if hasattr(value, "__iter__") else [value]))
-    except (TypeError, ValueError):
-        raise ParameterError(f"{name} = {value!r}: expected a list of times") from None
-    if any(not math.isfinite(t) or t < 0 for t in ts):
-        raise ParameterError(f"{name}: times must be finite and >= 0")
-    return ts
-
-
-def _matrix(name, value):
-    if isinstance(value, str):
-        text = value.strip()
-        if not text:
-            return ()
-        try:
-            value = json.loads(text)
-        except json.JSONDecodeError:
-            raise ParameterError(f"{name} = {text!r}: give a matrix as a JSON list of rows, e.g. "
-                                 "[[1100, 330, 0], [330, 1100, 0], [0, 0, 385]]") from None
-    try:
-        rows = tuple(tuple(float(c) for c in row) for row in value)
-    except (TypeError, ValueError):
-        raise ParameterError(f"{name} = {value!r}: expected a list of rows of numbers") from None
-    if rows and (any(len(r) != len(rows) for r in rows) or any(not math.isfinite(c) for r in rows for c in r)):
-        raise ParameterError(f"{name}: the matrix must be square with finite entries")
-    return rows
-
-
-def _mapping(name, value):
-    """A mapping of names to text (the roles of a mesh's boundaries), sorted by name; JSON text is read too."""
-    if isinstance(value, str):
-        try:
-            value = json.loads(value) if value.strip() else {}
-        except json.JSONDecodeError:
-            raise ParameterError(f"{name} = {value!r}: give a table of name = value, e.g. "
-                                 '{"bottom": "contact", "left": "clamped"}') from None
-    if isinstance(value, (list, tuple)):
-        try:
-            value = dict(value)
-        except (TypeError, ValueError):
-            raise ParameterError(f"{name} = {value!r}: expected a table of name = value") from None
-    if not isinstance(value, dict) or not all(isinstance(k, str) and isinstance(v, str) for k, v in value.items()):
-        raise ParameterError(f"{name} = {value!r}: expected a table of names to text, e.g. "
-                             '{"bottom": "contact", "left": "clamped"}')
-    return dict(sorted(value.items()))
+from .numerics import SCHEMES
+from .physics.laws import LAWS
+from .values import Param, closest_name, to_plain  # noqa: F401 (the table's row type and helpers, imported from here)
 
 
 def _p(name, default, unit, meaning, kind="float", **kw) -> Param:
@@ -215,8 +29,8 @@ def _p(name, default, unit, meaning, kind="float", **kw) -> Param:
 _POS = dict(lower=0.0, lower_open=True)
 _NONNEG = dict(lower=0.0)
 
-#: Every parameter any scene may use, by name.
-PARAMETERS: dict[str, Param] = {p.name: p for p in [
+#: The parameters of the table, by name (the contact laws add theirs: :data:`PARAMETERS`).
+_TABLE: dict[str, Param] = {p.name: p for p in [
     # geometry and mesh
     _p("length", 1.0, "m", "rod length", **_POS),
     _p("width", 1.0, "m", "body extent in x", **_POS),
@@ -244,7 +58,7 @@ PARAMETERS: dict[str, Param] = {p.name: p for p in [
     _p("k", 0.01, "s", "time step (uniform grid; the last step is not longer than k)", **_POS),
     _p("scheme", "explicit", "", "time scheme: 'explicit' = the paper's (contact lagged, conditionally stable), "
        "'implicit' = backward Euler with implicit contact (stable), 'bdf2' = second-order BDF with implicit contact; Model B: 'vi' (one variational inequality "
-       "per step)", "choice", choices=tuple(SCHEME_REGISTRY)),
+       "per step)", "choice", choices=tuple(SCHEMES)),
     _p("rtol", 0.0, "1", "relative tolerance of error-controlled steps (implicit, bdf2, vi); 0: fixed steps of k",
        lower=0.0, upper=0.5),
     _p("atol", 1e-9, "m", "absolute tolerance of error-controlled steps (the displacement's)", **_POS),
@@ -324,36 +138,18 @@ PARAMETERS: dict[str, Param] = {p.name: p for p in [
 ]}
 
 
-def _add_law_parameters() -> tuple:
-    """Add the parameters the contact laws declare in their own files (workbench.physics.laws); their names."""
-    from .physics.laws import LAWS
-
-    names = []
+def _law_parameters() -> dict:
+    """The parameters the contact laws declare in their own files (:mod:`workbench.physics.laws`), by name."""
+    out = {}
     for law in LAWS:
         for param in law.parameters:
-            if param.name in PARAMETERS and PARAMETERS[param.name] != param:
+            if param.name in _TABLE or out.get(param.name, param) != param:
                 raise RuntimeError(f"contact law {law.name}: parameter {param.name} is already defined")
-            PARAMETERS[param.name] = param
-            names.append(param.name)
-    return tuple(names)
+            out[param.name] = param
+    return out
 
 
 #: Names of the parameters the contact laws add (beyond the table above).
-LAW_PARAMETERS = _add_law_parameters()
-
-
-def closest_name(name: str, known) -> str:
-    """A 'did you mean' suffix for an unknown name, or '' (an exact match but for case comes first)."""
-    known = list(known)
-    same = [k for k in known if k.lower() == str(name).lower()]
-    hint = same or difflib.get_close_matches(str(name), known, n=1, cutoff=0.6)
-    return f"; did you mean {hint[0]!r}?" if hint else ""
-
-
-def to_plain(value):
-    """A JSON-able form of a checked value (expressions become their text)."""
-    if isinstance(value, Expression):
-        return value.source
-    if isinstance(value, tuple):
-        return [to_plain(v) for v in value]
-    return value
+LAW_PARAMETERS = tuple(_law_parameters())
+#: Every parameter any scene may use, by name: the table and the laws' own.
+PARAMETERS: dict[str, Param] = _TABLE | _law_parameters()

@@ -20,6 +20,7 @@ import math
 from dataclasses import dataclass
 
 from .errors import ParameterError
+from .numerics import SCHEMES
 
 
 @dataclass(frozen=True)
@@ -64,16 +65,20 @@ def estimate(geometry, order: int, solver: str = "auto", iterative: bool = False
     return Estimate(int(ndof), factor + matrices)
 
 
-def resources(scene, model, n_steps: int) -> None:
-    """Refuse, before any work, a run whose factorisation cannot fit in the free memory."""
-    est = estimate(model.geometry, scene["order"], scene["solver"], scene["scheme"] == "explicit")
+def resources(scene, model, n_steps: int, processes: int = 1) -> None:
+    """Refuse, before any work, a run whose factorisation cannot fit in the free memory (on several MPI
+    ``processes`` each holds its part: the estimate of the whole does not apply)."""
+    if processes > 1:
+        return
+    iterative = SCHEMES[scene["scheme"]].iterative
+    est = estimate(model.geometry, scene["order"], scene["solver"], iterative)
     free = available_memory()
     if est.bytes > 0.9 * free:
         which = "h" if not any(scene.values.get(n, 0) for n in model.geometry.cell_names) else "nx/ny/nz"
         raise ParameterError(f"{which} = {scene['h']:g} (order {scene['order']}) gives about {est.ndof:.2g} "
                              f"displacement dofs; assembling and factoring them needs about {est.bytes / 2**30:.3g} GB, "
                              f"more than the {free / 2**30:.3g} GB this machine has free: use a larger h or a lower "
-                             "order" + ("" if scene["scheme"] != "explicit" or scene["solver"] == "cg" else
+                             "order" + ("" if not iterative or scene["solver"] == "cg" else
                                         ", or solver = 'cg' (no factor)"))
 
 
@@ -88,8 +93,28 @@ def warnings_for(scene, model) -> list:
     g = model.geometry
     # (the paper's own P1 on its presets, however it was given: by default, explicitly, or from a restarted archive)
     paper = scene.base in PAPER_P1 and scene["order"] == 1
-    if g.dim >= 2 and scene["order"] == 1 and model.kind == "A" and not paper and g.aspect() <= 0.25:
+    if g.dim >= 2 and scene["order"] == 1 and model.max_order(g.dim) >= 2 and not paper and g.aspect() <= 0.25:
         out.append(f"{scene.name}: P1 elements on a thin body (thickness / length = {g.aspect():.2g}) lock in bending, "
                    "so displacements come out too small (the block at h = 0.05: 50 %; the slab at h = 0.0125: 5 %); "
                    "order = 2 converges at the same cost")
-    return out + g.warnings(scene.values)
+    return out + _contact_zone(scene, g)
+
+
+def _contact_zone(scene, g) -> list:
+    """Hertz's contact radius for the largest load near the edge of a Hertz body's contact zone (beyond it the side
+    is free, so a contact reaching it is cut off)."""
+    if g.zone_radius is None or "load" not in scene.values or "E" not in scene.values:
+        return []
+    import numpy as np
+
+    from .references import hertz
+
+    P = max(float(scene["load"](t=t)) for t in np.linspace(0.0, scene["T"], 101))
+    if P <= 0:
+        return []
+    a = (hertz.cylinder if g.dim == 2 else hertz.sphere)(P, g.extent[0], scene["E"], scene["nu"])[0]
+    if a <= 0.8 * g.zone_radius:
+        return []
+    return [f"load = {P:g} gives Hertz's contact radius a = {a:.3g} m, near or beyond the contact zone (the part of "
+            f"the curved side within {g.zone_radius:.3g} m of the apex, refined, that can touch the foundation): "
+            "reduce the load, or increase contact_zone or radius"]

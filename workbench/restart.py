@@ -73,12 +73,9 @@ class NoRestartState(ParameterError):
 def capture(scheme, steps, recorder) -> dict:
     """The full state of a run between two steps (copies); on several MPI processes in the serial order, on rank 0
     (None on the others; every rank must call it)."""
-    state = scheme.state(restart=True)
-    shell = scheme.d.shell
-    if shell is not None:
-        state = shell.serial_state(state, scheme.distributed_layout)
-        if state is None:
-            return None
+    state = scheme.d.gather_state(scheme.state(restart=True), scheme.distributed_layout)
+    if state is None:
+        return None
     return {"time": steps.t, "scheme_name": scheme.name, "scheme": state, "steps": steps.state(),
             "recorder": recorder.state()}
 
@@ -204,15 +201,12 @@ def decode(ds: xr.Dataset) -> dict:
 
 def restore(state: dict, disc, scheme, steps, recorder, archive: xr.Dataset) -> None:
     """Put the run back where the archive left it (the discretisation must be the archive's)."""
-    ndof = disc.fes.ndofglobal  # (several MPI processes: the archive is in the serial order, Shell.local_state)
+    ndof = disc.ndof_global  # (several MPI processes: the archive is in the serial order)
     if state["ndof"] != ndof or state["scheme_name"] != scheme.name:
         raise ParameterError(f"the archive's restart state is for {state['ndof']} dofs of the {state['scheme_name']} "
                              f"scheme, this run has {ndof} of the {scheme.name} scheme (an archive of another "
                              "workbench version?); run it again from the start")
-    local = state["scheme"]
-    if disc.shell is not None:
-        local = disc.shell.local_state(local, scheme.distributed_layout)
-    scheme.restore(local)
+    scheme.restore(disc.scatter_state(state["scheme"], scheme.distributed_layout))
     steps.restore(state["steps"])
     recorder.resume(archive, state["recorder"])
 

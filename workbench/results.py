@@ -34,7 +34,7 @@ from pathlib import Path
 import numpy as np
 import xarray as xr
 
-from .parameters import to_plain
+from .values import to_plain
 
 COMPONENTS = ("x", "y", "z")
 STRESS_COMPONENTS = {1: ("xx",), 2: ("xx", "yy", "xy"), 3: ("xx", "yy", "zz", "yz", "xz", "xy")}
@@ -239,7 +239,7 @@ class Recorder:
         d = self.disc
         stress, vm = stress_and_von_mises([(tensor, d.cell_strains(vector)) for tensor, vector in scheme.stress_parts()],
                                           d.dim)
-        edges = d.edge_values() if d.scene["order"] > 1 else None
+        edges = d.edge_values() if d.numerics.order > 1 else None
         self.snaps.append((t, d.u.vec.FV().NumPy().copy(), stress, vm, edges))
 
     def dataset(self, attrs: dict) -> xr.Dataset:
@@ -289,7 +289,7 @@ class Recorder:
             vxyz = d.vertex_xyz
             for c in range(dim):
                 coords[f"vertex_{COMPONENTS[c]}"] = _var("vertex", vxyz[:, c], f"vertex_{COMPONENTS[c]}")
-            data["cell_vertices"] = _var(("cell", "corner"), mesh_cells(d.mesh, dim), "cell_vertices")
+            data["cell_vertices"] = _var(("cell", "corner"), d.cells, "cell_vertices")
             data["mesh"] = ugrid_topology(dim, data["cell_vertices"])
             if dim == 3:
                 data["mesh_volume_shape"] = xr.Variable(("cell",), np.zeros(len(data["cell_vertices"]), np.int8), attrs={
@@ -330,13 +330,6 @@ def ugrid_topology(dim: int, connectivity: xr.Variable) -> xr.Variable:
     if shape:
         attrs["volume_shape_type"] = "mesh_volume_shape"
     return xr.Variable((), np.int32(0), attrs=attrs)
-
-
-def mesh_cells(mesh, dim):
-    """Vertex indices (0-based) of every cell of an NGSolve mesh, shape (cell, dim + 1)."""
-    ngm = mesh.ngmesh
-    elems = {1: ngm.Elements1D, 2: ngm.Elements2D, 3: ngm.Elements3D}[dim]().NumPy()
-    return np.array(elems["nodes"][:, : dim + 1], dtype=np.int64) - 1
 
 
 #: The command or call that is making the current result (set by the command line; else the Python call).

@@ -10,24 +10,26 @@ Examples
 from __future__ import annotations
 
 import contextlib
+import inspect
 import warnings
+from pathlib import PurePath
 
 import numpy as np
 
-from . import discretisation, parallel, preflight, results, scenes
+from . import numerics as numerics_of
+from . import parallel, preflight, results, scenes
+from . import restart as restarts
 from .errors import Diverged, ParameterError
-from .parameters import closest_name
 from .schemes import scheme_class
 from .schemes.stepping import AdaptiveSteps, FixedSteps, march, time_grid
 from .threads import blas_single_threaded, task_manager
+from .values import closest_name
 
 #: Above this many steps only about MAX_RECORDS steps are recorded (evenly), unless asked otherwise.
 MAX_RECORDS = 2000
 #: Error-controlled runs record up to this many steps (their short steps are where things happen: thinned evenly in
 #: time they would be the ones dropped).
 MAX_RECORDS_ADAPTIVE = 20000
-#: The keyword arguments of :func:`run` that are not scene parameters.
-RUN_OPTIONS = ("progress", "record_times", "times", "limit", "threads", "model", "restart", "checkpoint")
 
 __all__ = ["run", "time_grid", "MAX_RECORDS"]
 
@@ -82,29 +84,38 @@ def run(scene=None, *, restart=None, checkpoint=None, progress=None, record_time
         When the state becomes non-finite or unbounded; ``err.dataset`` holds
         the steps computed before, marked ``status = "incomplete"``.
     """
-    from . import restart as restarts
-
-    for key in overrides:
-        if key not in scenes.PARAMETERS and key.lower() not in scenes.PARAMETERS:
-            hint = closest_name(key, RUN_OPTIONS)
-            if hint:
-                raise ParameterError(f"unknown option {key!r} of workbench.run{hint}")
-    resume = None
-    if restart is not None:
-        archive, state = restarts.read(restart)
-        if "T" in overrides:  # (before the scene: the archive's snapshots after an earlier T would be refused first)
-            restarts.check_time(restart, state, scenes.PARAMETERS["T"].check(overrides["T"]))
-        sc = scenes.scene(scene, **overrides) if scene is not None else restarts.archived_scene(archive, **overrides)
-        restarts.check(restart, archive, state, sc, (model or sc.model_of()).terms)
-        resume = (archive, state, restart)
-    elif scene is None:
-        raise ParameterError("workbench.run: give a scene (a built-in name, a .toml file or a Scene), or restart=PATH "
-                             "to continue an archived run")
-    else:
-        sc = scenes.scene(scene, **overrides)
+    _check_options(overrides, checkpoint, limit, threads)
+    sc, resume = _scene_and_archive(scene, restart, overrides, model)
     if sc["checkpoint_every"] and checkpoint is None:
         raise ParameterError(f"checkpoint_every = {sc['checkpoint_every']} needs a file to write the checkpoints to: "
                              "give -o OUT.nc (workbench.run: checkpoint=PATH)")
+    numerics = numerics_of.from_scene(sc, threads)
+    sync = tuple(sc["snapshots"]) + (tuple(record_times) if record_times is not None else ())
+    try:
+        grid = time_grid(sc["T"], sc["k"], times, sync=sync)
+    except ValueError as err:
+        raise ParameterError(str(err)) from None
+    if resume is not None and not numerics.adaptive:
+        restarts.check_grid(restart, grid, resume.state, resume.archive)
+    model = model or sc.model_of()
+    world = parallel.world()
+    parallel.check(sc, model, numerics)
+    preflight.resources(sc, model, len(grid) - 1, processes=world.size)
+    call = _call(scene, dict(restart=restart, checkpoint=checkpoint), overrides,
+                 dict(record_times=record_times, times=times, limit=limit, threads=threads))
+    job = _Run(sc, model, numerics, world, call, resume=resume, checkpoint=checkpoint, progress=progress)
+    with blas_single_threaded(), _quiet_unless_root(world):
+        return job.execute(grid, sync, record_times, limit)
+
+
+def _check_options(overrides: dict, checkpoint, limit, threads) -> None:
+    """The options of :func:`run` that are not scene values, checked before any work."""
+    options = [name for name, p in inspect.signature(run).parameters.items() if p.kind is p.KEYWORD_ONLY]
+    for key in overrides:
+        if key not in scenes.PARAMETERS and key.lower() not in scenes.PARAMETERS:
+            hint = closest_name(key, options)
+            if hint:
+                raise ParameterError(f"unknown option {key!r} of workbench.run{hint}")
     if checkpoint is not None:
         from .files import check_output
 
@@ -113,32 +124,43 @@ def run(scene=None, *, restart=None, checkpoint=None, progress=None, record_time
         raise ParameterError(f"limit = {limit!r}: give the displacement bound in m, a number > 0")
     if threads is not None and (isinstance(threads, bool) or not isinstance(threads, int) or threads < 1):
         raise ParameterError(f"threads = {threads!r}: give an integer >= 1 (NGSolve TaskManager threads)")
-    sync = tuple(sc["snapshots"]) + (tuple(record_times) if record_times is not None else ())
-    try:
-        grid = time_grid(sc["T"], sc["k"], times, sync=sync)
-    except ValueError as err:
-        raise ParameterError(str(err)) from None
-    if resume is not None and not sc.values.get("rtol", 0) > 0:
-        restarts.check_grid(restart, grid, resume[1], resume[0])
-    model = model or sc.model_of()
-    parallel.check(sc, model)
-    if not parallel.world().parallel:  # (several MPI processes: each holds its part, the serial estimate does not apply)
-        preflight.resources(sc, model, len(grid) - 1)
-    given = [] if scene is None else [repr(scene if isinstance(scene, str) else getattr(scene, "name", scene))]
-    given += [f"{k}={results.brief(v)}" for k, v in (("restart", restart), ("checkpoint", checkpoint))
-              if v is not None]
+
+
+class _Resume:
+    """A run continued from an archive: the archive, the state it holds, and where it was read from."""
+
+    def __init__(self, archive, state, path):
+        self.archive, self.state, self.path = archive, state, path
+
+
+def _scene_and_archive(scene, restart, overrides: dict, model):
+    """(the scene, the archive to continue or None), checked: a restart may change only T and the output options."""
+    if restart is None:
+        if scene is None:
+            raise ParameterError("workbench.run: give a scene (a built-in name, a .toml file or a Scene), or "
+                                 "restart=PATH to continue an archived run")
+        return scenes.scene(scene, **overrides), None
+    archive, state = restarts.read(restart)
+    if "T" in overrides:  # (before the scene: the archive's snapshots after an earlier T would be refused first)
+        restarts.check_time(restart, state, scenes.PARAMETERS["T"].check(overrides["T"]))
+    sc = scenes.scene(scene, **overrides) if scene is not None else restarts.archived_scene(archive, **overrides)
+    restarts.check(restart, archive, state, sc, (model or sc.model_of()).terms)
+    return sc, _Resume(archive, state, restart)
+
+
+def _call(scene, paths: dict, overrides: dict, options: dict) -> str:
+    """The Python call that makes this result, for the ``history`` attribute (long sequences by their ends)."""
+    given = [] if scene is None else [repr(scene.name if isinstance(scene, (scenes.Scene, PurePath)) else scene)]
+    given += [f"{k}={results.brief(v)}" for k, v in paths.items() if v is not None]
     given += [f"{k}={results.brief(v)}" for k, v in overrides.items()]
-    given += [f"{k}={results.brief(v)}" for k, v in (("record_times", record_times), ("times", times),
-                                                     ("limit", limit), ("threads", threads)) if v is not None]
-    call = f"workbench.run({', '.join(given)})"
-    with blas_single_threaded(), _quiet_unless_rank0():
-        return _run(sc, model, grid, record_times, progress, limit, threads, call, resume, checkpoint)
+    given += [f"{k}={results.brief(v)}" for k, v in options.items() if v is not None]
+    return f"workbench.run({', '.join(given)})"
 
 
 @contextlib.contextmanager
-def _quiet_unless_rank0():
+def _quiet_unless_root(world):
     """On several MPI processes the ranks other than 0 give no warnings (rank 0 gives them for all)."""
-    if parallel.world().root:
+    if world.root:
         yield
         return
     with warnings.catch_warnings():
@@ -146,95 +168,102 @@ def _quiet_unless_rank0():
         yield
 
 
-def _run(sc, model, grid, record_times, progress, limit, threads, call, resume=None, checkpoint=None):
-    from . import restart as restarts
+class _Run:
+    """One run, put together: the discretisation, the scheme and its step controller, the recorder, the checkpoints
+    and the Dataset's attributes (scene -> model -> discretisation -> scheme -> recorded Dataset)."""
 
-    adaptive = sc.values.get("rtol", 0) > 0
-    with results.Clock() as setup, task_manager(threads):  # (threads given: the factorisations and the condensed
-        disc = discretisation.build(model, sc)            # contact systems use them too)
-        scheme = scheme_class(sc["scheme"])(disc)
-        if adaptive:
-            sync = tuple(sc["snapshots"]) + (tuple(record_times) if record_times is not None else ())
-            steps = AdaptiveSteps(sc["T"], sc["k"], rtol=sc["rtol"], atol=sc["atol"], k_min=sc["k_min"],
-                                  k_max=sc["k_max"] or sc["T"], order=scheme.order, sync=sync,
-                                  admissible=scheme.admissible_step)
-            checks = scheme.preflight(sc["k"])
-        else:
-            steps = FixedSteps(grid)
-            checks = scheme.preflight(steps.k_max)
-    # (an error-controlled run resolves debonding by its own steps: the fixed-step resolution warning is moot)
-    for message in preflight.warnings_for(sc, model) + ([] if adaptive else scheme.warnings()):
-        warnings.warn(message, RuntimeWarning, stacklevel=3)
-    world = disc.world
-    if world.parallel:  # rank 0 records the serial shell, the ranks send their parts
-        serial = disc.shell.disc
-        recorder = parallel.GatheringRecorder(disc.shell, results.Recorder(serial, sc["T"], sc["snapshots"],
-                                                                           record_times, MAX_RECORDS)
-                                              if world.root else None)
-    else:
-        serial = disc
-        recorder = results.Recorder(disc, sc["T"], sc["snapshots"], record_times,
-                                    MAX_RECORDS_ADAPTIVE if adaptive else MAX_RECORDS, every_step=adaptive)
-    if resume is not None:
-        restarts.restore(resume[1], disc, scheme, steps, recorder, resume[0])
-    if limit is None:
-        limit, origin = 10.0 * model.geometry.size, "10 x the body's largest extent, the default limit"
-    else:
-        origin = f"limit = {limit:g} m, as given"
-    g = model.geometry
+    def __init__(self, sc, model, numerics, world, call, *, resume=None, checkpoint=None, progress=None):
+        self.sc, self.model, self.numerics, self.world, self.call = sc, model, numerics, world, call
+        self.resume, self.checkpoint, self.progress = resume, checkpoint, progress
+        self.failed_checkpoint = None
 
-    def attrs(status, failure=None, wall=0.0, cpu=0.0):
+    def execute(self, grid, sync, record_times, limit):
+        """Set up, step from 0 (or the archive's time) to T, and return the Dataset (None on ranks other than 0);
+        a run that diverges raises with the Dataset of what it computed."""
+        sc, n = self.sc, self.numerics
+        with results.Clock() as setup, task_manager(n.threads):  # (threads: the factorisations use them too)
+            self.disc = disc = parallel.discretise(self.model, sc, n)
+            self.scheme = scheme = scheme_class(n.scheme)(disc)
+            if n.adaptive:
+                self.steps = AdaptiveSteps(sc["T"], n.k, rtol=n.rtol, atol=n.atol, k_min=n.k_min, k_max=n.largest_step,
+                                           order=scheme.order, sync=sync, admissible=scheme.admissible_step)
+                self.checks = scheme.preflight(n.k)
+            else:
+                self.steps = FixedSteps(grid)
+                self.checks = scheme.preflight(self.steps.k_max)
+        self.setup_time = setup.wall
+        # (an error-controlled run resolves debonding by its own steps: the fixed-step resolution warning is moot)
+        for message in preflight.warnings_for(sc, self.model) + ([] if n.adaptive else scheme.warnings()):
+            warnings.warn(message, RuntimeWarning, stacklevel=4)
+        every = n.adaptive  # error-controlled runs keep every step (their short steps are where things happen)
+        self.recorder = disc.recording(lambda d: results.Recorder(
+            d, sc["T"], sc["snapshots"], record_times, MAX_RECORDS_ADAPTIVE if every else MAX_RECORDS,
+            every_step=every))
+        if self.resume is not None:
+            restarts.restore(self.resume.state, disc, scheme, self.steps, self.recorder, self.resume.archive)
+        origin = f"limit = {limit:g} m, as given" if limit is not None else \
+            "10 x the body's largest extent, the default limit"
+        limit = limit if limit is not None else 10.0 * self.model.geometry.size
+        failure = None
+        with results.Clock() as self.clock, task_manager(n.threads):
+            try:
+                march(disc, scheme, self.steps, self.recorder, progress=self.progress, limit=limit,
+                      limit_origin=origin, resume=self.resume is not None, after_step=self._after_step())
+            except Diverged as err:
+                failure = err
+        ds = None  # (several MPI processes: rank 0 holds the records)
+        if self.world.root:
+            status = "complete" if failure is None else "incomplete"
+            ds = self.recorder.dataset(self.attrs(status, failure, self.clock.wall, self.clock.cpu))
+        if failure is not None:
+            failure.dataset = ds
+            raise failure
+        state = restarts.capture(scheme, self.steps, self.recorder)  # (several MPI processes: every rank)
+        return restarts.attach(ds, state) if self.world.root else None
+
+    def attrs(self, status, failure=None, wall=0.0, cpu=0.0) -> dict:
         """The Dataset's attributes: provenance, the discretisation, cost, outcome (and both parts of a restart)."""
-        if adaptive:
-            taken = recorder.extra.get("step_size", [])
+        steps, g = self.steps, self.model.geometry
+        if self.numerics.adaptive:
+            taken = self.recorder.extra.get("step_size", [])
             control = {"k_actual": float(np.nanmax(taken)) if len(taken) > 1 else float("nan"),
                        "nsteps": steps.accepted_steps, "accepted_steps": steps.accepted_steps,
                        "rejected_steps": steps.rejected_steps}
         else:
             control = {"k_actual": steps.k_max, "nsteps": steps.taken if status == "checkpoint" else steps.n_steps}
         extra = {
-            "scheme": scheme.name, "h_max": g.h_max(), "cells": "x".join(map(str, g.cells())),
-            **control, "ndof": serial.ndof, "threads": threads or 1, "mpi_processes": world.size,
-            "setup_time": setup.wall, "wall_time": wall, "cpu_time": cpu, "status": status,
-            "failure": "" if failure is None else str(failure),
+            "scheme": self.scheme.name, "h_max": g.h_max(), "cells": "x".join(map(str, g.cells())),
+            **control, "ndof": self.disc.ndof_global, "threads": self.numerics.threads or 1,
+            "mpi_processes": self.world.size, "setup_time": self.setup_time, "wall_time": wall, "cpu_time": cpu,
+            "status": status, "failure": "" if failure is None else str(failure),
             "failure_type": "" if failure is None else type(failure).__name__,
-        } | checks
-        out = results.provenance(sc, extra, call, model.terms)
-        return out if resume is None else restarts.provenance(out, resume[0], resume[2], resume[1]["time"])
+        } | self.checks
+        out = results.provenance(self.sc, extra, self.call, self.model.terms)
+        if self.resume is None:
+            return out
+        return restarts.provenance(out, self.resume.archive, self.resume.path, self.resume.state["time"])
 
-    after_step = None
-    if checkpoint is not None and sc["checkpoint_every"] > 0:
-        every, failed = sc["checkpoint_every"], []
+    def _after_step(self):
+        """The checkpoint writer the loop calls after each accepted step (None without checkpoints)."""
+        every = self.sc["checkpoint_every"]
+        if self.checkpoint is None or every <= 0:
+            return None
 
         def after_step(t, n):
             """Every ``every`` steps (counted from the run's start, so a continued run keeps the schedule), the
             archive so far with the state to go on from, written atomically: a kill leaves the previous one."""
-            if n % every or steps.done():  # (the final archive is the caller's to write)
+            if n % every or self.steps.done():  # (the final archive is the caller's to write)
                 return
-            state = restarts.capture(scheme, steps, recorder)  # (several MPI processes: every rank, rank 0 writes)
-            if not world.root:
+            state = restarts.capture(self.scheme, self.steps, self.recorder)  # (every rank; rank 0 writes)
+            if not self.world.root:
                 return
-            ds = restarts.attach(recorder.dataset(attrs("checkpoint", None, *clock.elapsed())), state)
+            ds = restarts.attach(self.recorder.dataset(self.attrs("checkpoint", None, *self.clock.elapsed())), state)
             try:
-                results.write(ds, checkpoint)
+                results.write(ds, self.checkpoint)
             except OSError as err:  # a full disk should not stop a long run: say so once, go on
-                if not failed:
-                    failed.append(err)
-                    warnings.warn(f"checkpoint {checkpoint} could not be written at t = {t:.6g} s "
+                if self.failed_checkpoint is None:
+                    self.failed_checkpoint = err
+                    warnings.warn(f"checkpoint {self.checkpoint} could not be written at t = {t:.6g} s "
                                   f"({err.strerror or err}); the run goes on", RuntimeWarning, stacklevel=2)
 
-    failure = None
-    with results.Clock() as clock, task_manager(threads):
-        try:
-            march(disc, scheme, steps, recorder, progress=progress, limit=limit, limit_origin=origin,
-                  resume=resume is not None, after_step=after_step)
-        except Diverged as err:
-            failure = err
-    ds = None  # (several MPI processes: rank 0 holds the records)
-    if world.root:
-        ds = recorder.dataset(attrs("complete" if failure is None else "incomplete", failure, clock.wall, clock.cpu))
-    if failure is not None:
-        failure.dataset = ds
-        raise failure
-    state = restarts.capture(scheme, steps, recorder)  # (several MPI processes: every rank; rank 0's Dataset)
-    return restarts.attach(ds, state) if world.root else None
+        return after_step

@@ -29,7 +29,10 @@ import numpy as np
 
 from .errors import ParameterError
 from .geometry import GEOMETRIES
-from .parameters import LAW_PARAMETERS, PARAMETERS, Param, closest_name, to_plain
+from .models import MODELS
+from .numerics import CONTROL, EXPLICIT, MEMORY, SCHEMES, SPACE, TIME, is_adaptive, schemes_of
+from .parameters import LAW_PARAMETERS, PARAMETERS
+from .values import Param, closest_name, to_plain
 
 try:  # Python >= 3.11
     import tomllib
@@ -38,13 +41,12 @@ except ModuleNotFoundError:  # pragma: no cover
 
 _CONTACT = ("contact", "adhesion", "c_nu", "m_nu", "gap", "gamma_nu", "eps_a", "L", "beta0",
             "bonding_truncation") + LAW_PARAMETERS
-_ADAPTIVE = ("rtol", "atol", "k_min", "k_max")
-_TIME = ("T", "k", "scheme", "order", "h", "solver", "allow_unstable") + _ADAPTIVE
+_TIME_B = ("T",) + SPACE + TIME + CONTROL  # Model B's numerics (and its memory's, _MEMORY)
+_TIME = _TIME_B + EXPLICIT
 _OUTPUT = ("probes", "snapshots", "checkpoint_every")
 _KV = ("E", "nu", "a1", "a2", "elastic_tensor", "viscous_tensor")
-_TIME_B = ("T", "k", "scheme", "order", "h", "solver") + _ADAPTIVE
 _UNILATERAL = ("gap", "F", "c")
-_MEMORY = ("kernel", "kernel_E", "kernel_nu", "prony", "memory_rule", "kernel_approximation", "kernel_tol")
+_MEMORY = ("kernel", "kernel_E", "kernel_nu", "prony") + MEMORY
 _LOADS = ("body_force", "point_force", "point_force_at")
 _MESH = ("mesh", "boundaries", "mesh_digest")
 _HERTZ = ("radius", "h_contact", "contact_zone")
@@ -66,8 +68,8 @@ MODEL_PARAMETERS = {
     ("slab", "A"): _geometry_parameters("slab") + _TIME + ("plane",) + _KV + _CONTACT + ("c_tau",) + _loads("slab")
                    + _OUTPUT,
     ("block", "A"): _geometry_parameters("block") + _TIME + _KV + _CONTACT + ("c_tau",) + _loads("block") + _OUTPUT,
-    ("rod", "B"): ("length",) + _TIME_B + ("a",) + _UNILATERAL + ("kernel", "kernel_E", "prony", "memory_rule",
-                                                                   "kernel_approximation", "kernel_tol", "delta")
+    ("rod", "B"): ("length",) + _TIME_B + ("a",) + _UNILATERAL + ("kernel", "kernel_E", "prony") + MEMORY
+                  + ("delta",)
                   + _OUTPUT,
     ("slab", "B"): _geometry_parameters("slab") + _TIME_B + ("plane", "E", "nu", "elastic_tensor") + _UNILATERAL
                    + _MEMORY + _loads("slab") + _OUTPUT,
@@ -266,17 +268,10 @@ class Scene:
             allowed = params[n].range_text()
             if n == "scheme":
                 allowed = " | ".join(repr(s) for s in schemes_of(self.model))
-            elif n == "order" and self.model == "B":
-                allowed = "1 | 2" if self.dim == 2 else "1"
+            elif n == "order":
+                allowed = " | ".join(str(o) for o in range(1, MODELS[self.model].max_order(self.dim) + 1))
             rows.append((n, to_plain(self.values[n]), params[n].unit, allowed, params[n].meaning))
         return rows
-
-
-def schemes_of(model: str) -> tuple:
-    """The scheme names a model can run (the registry: :data:`workbench.schemes.REGISTRY`)."""
-    from .schemes import REGISTRY
-
-    return tuple(name for name, (_, _, kind) in REGISTRY.items() if kind == model)
 
 
 def _known(base):
@@ -328,8 +323,8 @@ def make(name: str, overrides: dict | None = None, *, base: str | None = None, d
         values["snapshots"] = tuple(t for t in values["snapshots"] if t <= values["T"])
     if "point_force_at" in values and not values["point_force_at"]:
         values["point_force_at"] = (body.default_probes()[-1],)
-    if "scheme" not in overrides and preset.model == "B":
-        values["scheme"] = "vi"
+    if "scheme" not in overrides and values["scheme"] not in schemes_of(preset.model):  # (the table's default is A's)
+        values["scheme"] = schemes_of(preset.model)[0]
     _check_consistency(name, body, values, preset.model)
     user = frozenset(overrides) | ({"mesh_digest"} if "mesh" in known else set())  # (a variant keeps the digest)
     return Scene(name, preset.geometry, values, description or preset.description, user, base, preset.model, source)
@@ -361,22 +356,27 @@ def _check_consistency(name, body, v, model="A"):
     if v["scheme"] not in allowed:
         raise ParameterError(f"scheme = {v['scheme']!r} does not apply to a Model {model} scene; "
                              f"allowed: {' | '.join(repr(s) for s in allowed)}")
-    if model == "B":
+    scheme = SCHEMES[v["scheme"]]
+    if "prony" in v:
         _check_memory(body, v)
-        if v["order"] > (2 if body.dim == 2 else 1):
-            raise ParameterError(f"order = {v['order']}: Model B constrains the contact nodes (K_h): order 1, or 2 on "
-                                 f"a 2D body (vertices and facet midpoints); allowed here: order "
-                                 f"{'1 | 2' if body.dim == 2 else '1'}")
-    if v["solver"] == "cg" and v["scheme"] != "explicit":
-        raise ParameterError(f"solver = 'cg' (iterative) applies to the explicit scheme only; scheme = "
+    highest = MODELS[model].max_order(body.dim)
+    if v["order"] > highest:
+        raise ParameterError(f"order = {v['order']}: Model {model} constrains the contact nodes (K_h): order 1, or 2 on "
+                             f"a 2D body (vertices and facet midpoints); allowed here: order "
+                             f"{' | '.join(str(o) for o in range(1, highest + 1))}")
+    if v["solver"] == "cg" and not scheme.iterative:
+        iterative = " | ".join(repr(n) for n, e in SCHEMES.items() if e.iterative and e.model == model)
+        raise ParameterError(f"solver = 'cg' (iterative) applies to the scheme(s) {iterative} only; scheme = "
                              f"{v['scheme']!r} condenses on the contact dofs, one solve per contact dof: use "
-                             "solver = 'auto' (a direct factor) or scheme = 'explicit'")
+                             f"solver = 'auto' (a direct factor)" + (f" or scheme = {iterative}" if iterative else ""))
     if v["k"] > v["T"]:
         raise ParameterError(f"k = {v['k']:g} is larger than T = {v['T']:g}; allowed: 0 < k <= T")
-    if v.get("rtol", 0) > 0:
-        if v["scheme"] == "explicit":
-            raise ParameterError("rtol > 0 (error-controlled steps) applies to the implicit schemes (implicit, bdf2, "
-                                 "vi); the explicit scheme's step is bounded by its stability limit k_crit")
+    if is_adaptive(v["rtol"]):
+        if not scheme.error_control:
+            controlled = ", ".join(n for n, e in SCHEMES.items() if e.error_control)
+            raise ParameterError(f"rtol > 0 (error-controlled steps) applies to the schemes that estimate their error "
+                                 f"({controlled}); the {v['scheme']} scheme's step is bounded by its stability limit "
+                                 "k_crit")
         k_max = v["k_max"] or v["T"]
         if not v["k_min"] <= v["k"] <= k_max:
             raise ParameterError(f"k = {v['k']:g} (the first step) must lie in [k_min, k_max] = [{v['k_min']:g}, "

@@ -17,8 +17,14 @@ condense on the contact dofs, one solve per contact dof.
 for the explicit scheme in 3D, ``cg`` when the sparse factor would exceed
 :data:`FACTOR_BYTES` (:func:`choose`).
 
-All solvers work on NumPy views of NGSolve vectors: ``solve(rhs, out)`` writes
-the solution on the free dofs and zero on the Dirichlet dofs.
+Every solver is a :class:`Solver` (the protocol, with its defaults): ``solve(rhs, out)``
+writes the solution on the free dofs and zero on the Dirichlet dofs (NumPy views of
+NGSolve vectors), ``solve_many(R)`` does so for the columns of R; ``warm_start`` says
+whether ``solve`` starts from the values in ``out``, ``iterative`` whether it iterates
+(then ``last_iterations`` counts the last solve's iterations), ``preconditioner`` is an
+approximate inverse on the free dofs (a SciPy operator, or None) and ``matrix`` the
+matrix on the free dofs when the solver holds one as SciPy CSR (else None). A body
+distributed over MPI processes has its own (:mod:`workbench.parallel.algebra`).
 
 Examples
 --------
@@ -35,18 +41,40 @@ import scipy.sparse as sp
 from scipy.linalg import cho_solve_banded, cholesky_banded, get_lapack_funcs
 from scipy.sparse.csgraph import reverse_cuthill_mckee
 
+
+class Solver:
+    """The solver protocol (module docs) and its defaults: a direct solver that holds no SciPy matrix."""
+
+    name = ""
+    warm_start = False
+    iterative = False
+    preconditioner = None
+    matrix = None
+    last_iterations = 0
+
+    def solve(self, rhs: np.ndarray, out: np.ndarray) -> None:
+        raise NotImplementedError
+
+    def solve_many(self, R: np.ndarray) -> np.ndarray:
+        """Solutions for the columns of R (n x m), zero on the Dirichlet dofs."""
+        X = np.zeros_like(R)
+        for j in range(R.shape[1]):
+            self.solve(R[:, j], X[:, j])
+        return X
+
+
 def to_scipy(mat) -> sp.csr_matrix:
     """An NGSolve sparse matrix as SciPy CSR (the full matrix, also for symmetric storage)."""
     rows, cols, vals = mat.COO()
     rows, cols, vals = np.asarray(rows), np.asarray(cols), np.asarray(vals)
     n = mat.height
     A = sp.csr_matrix((vals, (rows, cols)), shape=(n, n))
-    if getattr(mat, "symmetric", False) or not np.any(rows < cols):  # lower triangle stored only
+    if not np.any(rows < cols):  # symmetric storage: the lower triangle only (SPD matrices here)
         A = A + sp.tril(A, -1).T
     return A.tocsr()
 
 
-class BandedCholesky:
+class BandedCholesky(Solver):
     """RCM-ordered banded Cholesky of ``K[free][:, free]`` (``perm``: a precomputed RCM order of it)."""
 
     name = "banded"
@@ -81,7 +109,7 @@ class BandedCholesky:
         return X
 
 
-class NGSolveDirect:
+class NGSolveDirect(Solver):
     """NGSolve's ``Inverse`` on the free dofs (``sparsecholesky`` needs a symmetric matrix)."""
 
     def __init__(self, mat, freedofs, method: str, fes_vector):
@@ -94,15 +122,9 @@ class NGSolveDirect:
         self.x.data = self.inv * self.y
         out[:] = self.x.FV().NumPy()
 
-    def solve_many(self, R: np.ndarray) -> np.ndarray:
-        """Solutions for the columns of R (n x m), zero on the Dirichlet dofs."""
-        X = np.empty_like(R)
-        for j in range(R.shape[1]):
-            self.solve(R[:, j], X[:, j])
-        return X
 
 
-class AMGConjugateGradient:
+class AMGConjugateGradient(Solver):
     """CG on ``K[free][:, free]`` with a smoothed-aggregation AMG preconditioner (pyamg) built on the near-null space
     ``modes`` (n x m), warm started from ``out`` (module docs).
 
@@ -114,17 +136,17 @@ class AMGConjugateGradient:
     """
 
     name = "cg"
-    warm_start = True  # (the scheme puts its first guess in ``out``)
+    warm_start = iterative = True  # (the scheme puts its first guess in ``out``)
 
     def __init__(self, K: sp.spmatrix, free: np.ndarray, modes: np.ndarray):
         import pyamg
 
         self.free = free
-        self.K = K[free][:, free].tocsr()
+        self.matrix = K[free][:, free].tocsr()
         self.fixed = np.setdiff1d(np.arange(K.shape[0]), free)
         # theta = 0: every connection strong (elasticity's couplings are all of one order); a coarse level of up to
         # 2000 unknowns is solved by a sparse LU (the default pseudo-inverse took 65 s at 271k dofs)
-        self.amg = pyamg.smoothed_aggregation_solver(self.K, B=np.ascontiguousarray(modes[free]), symmetry="hermitian",
+        self.amg = pyamg.smoothed_aggregation_solver(self.matrix, B=np.ascontiguousarray(modes[free]), symmetry="hermitian",
                                                      strength=("symmetric", {"theta": 0.0}), max_coarse=2000,
                                                      coarse_solver="splu")
         self.preconditioner = self.amg.aspreconditioner(cycle="V")
@@ -145,77 +167,18 @@ class AMGConjugateGradient:
 
         # SciPy's CG stops on the true residual, ||b - K x||_2 <= CG_TOL ||b||_2 (pyamg's own on the preconditioned
         # one, which let the true residual lie 3x above the tolerance)
-        x, info = cg(self.K, b, x0=x0, rtol=CG_TOL, atol=0.0, maxiter=1000, M=self.preconditioner, callback=counted)
+        x, info = cg(self.matrix, b, x0=x0, rtol=CG_TOL, atol=0.0, maxiter=1000, M=self.preconditioner, callback=counted)
         self.last_iterations = count[0]
         self.iterations += count[0]
         self.solves += 1
         if info != 0:
             from .errors import Diverged
 
-            residual = float(np.linalg.norm(b - self.K @ x) / max(np.linalg.norm(b), 1e-300))
+            residual = float(np.linalg.norm(b - self.matrix @ x) / max(np.linalg.norm(b), 1e-300))
             raise Diverged(f"the conjugate gradient solve (solver = 'cg') did not converge: relative residual "
                            f"{residual:.2g} after {count[0]} iterations")
         out[self.fixed] = 0.0
         out[self.free] = x
-
-    def solve_many(self, R: np.ndarray) -> np.ndarray:
-        X = np.zeros_like(R)
-        for j in range(R.shape[1]):
-            self.solve(R[:, j], X[:, j])
-        return X
-
-
-class DistributedSolver:
-    """K_A of a body distributed over MPI processes (:mod:`workbench.parallel`): NGSolve's conjugate gradients
-    preconditioned by ``pre`` (BDDC; ``method = 'cg'``) to a relative residual of :data:`CG_TOL` (in the
-    preconditioner's norm, NGSolve's), or NGSolve's sparse Cholesky factor, which gathers the matrix on rank 0
-    (``'sparsecholesky'``). ``solve(rhs, out)`` takes this rank's part of the right-hand side (a distributed
-    vector) and gives the solution cumulated (every copy of a shared dof holds its value), zero on the Dirichlet
-    dofs."""
-
-    def __init__(self, mat, pre, freedofs, vector, method: str):
-        self.name = method
-        self.fixed = np.nonzero(~np.array(freedofs, dtype=bool))[0]
-        self.pre = pre if method == "cg" else None
-        if method == "cg":
-            from ngsolve.krylovspace import CGSolver
-
-            self.inv = CGSolver(mat, pre.mat, tol=CG_TOL, maxiter=CG_MAXITER)
-        else:
-            self.inv = mat.Inverse(freedofs, inverse="sparsecholesky")
-        self.b, self.x = vector.CreateVector(), vector.CreateVector()
-        self.last_iterations = 0
-
-    def precondition(self, r: np.ndarray) -> np.ndarray:
-        """The preconditioner (BDDC; ``cg`` only) applied to this rank's part of a residual: an approximate K_A^-1 r,
-        cumulated (the step limit's LOBPCG, :func:`workbench.stability.lobpcg_smallest`)."""
-        self.x.data = self.pre.mat * self._distributed(r)
-        return self.x.FV().NumPy().copy()
-
-    def _distributed(self, r: np.ndarray):
-        """``self.b`` holding this rank's part of ``r`` (zero on the Dirichlet dofs), marked distributed."""
-        from .parallel import status
-
-        b = self.b.FV().NumPy()
-        b[:] = r
-        b[self.fixed] = 0.0
-        status(self.b, distributed=True)
-        return self.b
-
-    def solve(self, rhs: np.ndarray, out: np.ndarray) -> None:
-        b = self._distributed(rhs)
-        if self.name != "cg":
-            self.x.data = self.inv * b
-        else:
-            self.inv.Solve(rhs=b, sol=self.x)
-            self.last_iterations = self.inv.iterations
-            if self.inv.residuals and self.inv.residuals[-1] > self.inv._final_residual:
-                from .errors import Diverged
-
-                raise Diverged(f"the conjugate gradient solve (solver = 'cg', BDDC, on several processes) did not "
-                               f"converge in {CG_MAXITER} iterations: residual {self.inv.residuals[-1]:.3g} against "
-                               f"{self.inv._final_residual:.3g}")
-        out[:] = self.x.FV().NumPy()
 
 
 def rigid_body_modes(fes) -> np.ndarray:

@@ -7,13 +7,14 @@ cores, the time spent in a banded Cholesky of 1458 unknowns). Every solve in
 workbench is either a sparse factorisation, a back-substitution or a small dense
 solve, none of which gains from BLAS threads at these sizes. Two measures:
 
-* ``import workbench`` before NumPy starts every OpenBLAS with one thread (the
+* a process of workbench's own (the ``workbench`` command, a study's worker) starts
+  every OpenBLAS with one thread (:func:`lean_process`, before NumPy loads: the
   environment variables, unless set): the only measure that removed the stalls
   (measured with another process busy on the second core: setup 0.4-0.5 s in 8 of 8
   runs, against 0.7-11.7 s without);
-* a run holds every loaded BLAS pool at one thread while it computes
-  (threadpoolctl) and restores them after, for processes where NumPy came first
-  (it lowers the threads but does not stop pools already started).
+* a run in a user's process (a script, a notebook) holds every loaded BLAS pool at one
+  thread while it computes (threadpoolctl) and gives the user's settings back after;
+  ``import workbench`` itself changes nothing in the process.
 
 Examples
 --------
@@ -25,9 +26,40 @@ True
 from __future__ import annotations
 
 import contextlib
+import os
+import sys
 
-#: Set by :func:`workbench._lean_process` in a process of its own whose BLAS pools all started with one thread.
+#: The environment variables by which the BLAS libraries (OpenBLAS, OpenMP, MKL) size their pools when they load.
+BLAS_VARIABLES = ("OPENBLAS_NUM_THREADS", "OMP_NUM_THREADS", "MKL_NUM_THREADS")
+#: Set by :func:`lean_process` in a process of its own whose BLAS pools all started with one thread.
 POOLS_STARTED_SINGLE = False
+
+
+def single_threaded(environment: dict) -> dict:
+    """A copy of ``environment`` in which every BLAS pool starts with one thread (a worker process's)."""
+    return dict(environment) | {name: "1" for name in BLAS_VARIABLES}
+
+
+def lean_process() -> None:
+    """For a process started to run scenes only (``workbench run``, a study's worker), first thing, where no user code
+    runs before the run: skip what such a process does not need (measured on ``workbench run tp5``, 1.7 s in all).
+
+    * Every BLAS pool starts with one thread (the environment variables, unless set, before NumPy, SciPy or NGSolve
+      load); then the runs skip threadpoolctl's library scan (40 ms, :func:`blas_single_threaded`).
+    * dask counts as absent. With dask installed, xarray imports dask.array when it builds a Dataset and
+      dask.distributed when it writes one (looking for chunked arrays and a scheduler's lock): 0.35 s, for a
+      process whose arrays are all NumPy. Python's own rule (``sys.modules[name] is None``: the import raises
+      ImportError) takes xarray down its no-dask path.
+
+    Not for a session (a notebook may want dask, or set its own BLAS threads, later).
+    """
+    global POOLS_STARTED_SINGLE
+    if not {"numpy", "scipy", "ngsolve"} & set(sys.modules):
+        for name in BLAS_VARIABLES:
+            os.environ.setdefault(name, "1")
+        POOLS_STARTED_SINGLE = all(os.environ[name] == "1" for name in BLAS_VARIABLES)
+    for name in ("dask", "distributed"):
+        sys.modules.setdefault(name, None)
 
 
 @contextlib.contextmanager

@@ -30,7 +30,7 @@ import scipy.sparse as sp
 
 from .discretisation import bonding_space
 from .physics import kelvin_voigt
-from .results import mesh_cells
+from .discretisation import mesh_cells
 
 
 class MeshInfo:

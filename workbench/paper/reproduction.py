@@ -364,10 +364,3 @@ def report(problem, result) -> str:
         ref = paper.get(key, "")
         lines.append(f"  {label:<58} {val:>12.6g}   {('paper: ' + ref) if ref else ''}".rstrip())
     return "\n".join(lines)
-
-
-def main(argv=None) -> int:
-    """``workbench reproduce ARGS`` (the command line's parser and error handling)."""
-    from workbench.cli import main as cli_main
-
-    return cli_main(["reproduce", *(argv or [])])

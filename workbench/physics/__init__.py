@@ -8,7 +8,3 @@ a debonding rate and knows its time updates (:mod:`.bonding`), a relaxation kern
 knows its memory term (:mod:`.memory`), the compliant layer of Model B knows its
 nodal law (:mod:`.unilateral`). :mod:`workbench.models` builds them from a scene.
 """
-
-# The parameter table first: it adds the laws' own rows and so imports .laws, whose files import Param from it;
-# a law imported before the table would find it half-built.
-from .. import parameters as _parameters  # noqa: E402,F401

@@ -38,7 +38,7 @@ class ContactTerm:
     Class attributes: ``name`` (as listed in a run's ``terms``), ``rank`` (order of
     summation), ``side`` (where its normal slope can be non-zero: ``"compression"``,
     u_nu > 0, or ``"tension"``, u_nu < 0), ``tangential`` (acts on u_tau), ``uses_beta``
-    (needs the bonding field), ``parameters`` (the :class:`workbench.parameters.Param`
+    (needs the bonding field), ``parameters`` (the :class:`workbench.values.Param`
     rows it adds to the table).
     """
 

@@ -45,6 +45,7 @@ class GeneralKernel:
     """B(t) = b(t) C with b an expression in t (O(n) quadrature per step)."""
 
     kind = "kernel"
+    fit = None  # (it is the kernel itself, not a fit of one)
 
     def __init__(self, shape, tensor):
         self.shape, self.tensor = shape, tensor

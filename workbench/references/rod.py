@@ -89,8 +89,8 @@ def rod_ode(scene, rtol=1e-11, atol=1e-13, model=None):
     from scipy.integrate import solve_ivp
 
     model = model or scene.model_of()
-    if model.geometry.dim != 1 or model.kind != "A":
-        raise ValueError(f"rod_ode needs a Model A rod scene, got {scene.name!r}")
+    if model.geometry.dim != 1 or model.viscous is None:
+        raise ValueError(f"rod_ode needs a Kelvin-Voigt (Model A) rod scene, got {scene.name!r}")
     loads = model.loads
     delta, ell = loads.delta, model.geometry.extent[0]
     if not np.allclose(loads.u0(x=np.linspace(0, ell, 7)), delta(t=0.0)):
@@ -163,8 +163,8 @@ def rod_memory(scene, n=4000):
     from . import volterra
 
     model = scene.model_of()
-    if model.geometry.dim != 1 or model.kind != "B":
-        raise ValueError(f"rod_memory needs a Model B rod scene, got {scene.name!r}")
+    if model.geometry.dim != 1 or model.layer is None:
+        raise ValueError(f"rod_memory needs a rod scene with a compliant layer (Model B), got {scene.name!r}")
     delta = model.loads.delta
     layer = model.layer
     common = dict(a=model.elastic.modulus, ell=model.geometry.extent[0], F=layer.F, c=layer.c, g=layer.g, T=scene["T"],
@@ -172,7 +172,7 @@ def rod_memory(scene, n=4000):
     nan = lambda t: np.full(np.shape(t), np.nan)  # noqa: E731
     lift = lambda t: common["delta"](np.asarray(t, float)).copy()  # noqa: E731
     memory = model.memory
-    if getattr(memory, "fit", None) is not None:  # an exponential sum stands for a general kernel: use the kernel
+    if memory is not None and memory.fit is not None:  # an exponential sum stands for a general kernel: the kernel
         memory = scene.with_(kernel_approximation="quadrature").model_of().memory
     if memory is None or memory.kind == "prony":
         terms = memory.terms if memory is not None else []
@@ -189,4 +189,8 @@ def rod_memory(scene, n=4000):
 
 def rod_reference(scene):
     """The independent reference of a rod scene: :func:`rod_ode` (Model A) or :func:`rod_memory` (Model B)."""
-    return rod_memory(scene) if scene.model == "B" else rod_ode(scene)
+    return _ROD_REFERENCES[scene.model](scene)
+
+
+#: The rod reference of each model, by its letter.
+_ROD_REFERENCES = {"A": rod_ode, "B": rod_memory}

@@ -8,38 +8,29 @@ condensed onto the contact dofs): unconditionally stable, first order.
 ``vi`` — Model B: one variational inequality per step (long memory, unilateral
 constraint with a compliant layer), primal-dual active set on the contact nodes.
 
-:data:`REGISTRY` is the one place a scheme is registered: its name, module, class and
-model. The scene's choices of ``scheme`` and each model's schemes come from it; the
-classes are imported when first used.
+:data:`workbench.numerics.SCHEMES` is the one place a scheme is registered: its name,
+model, module and class. The scene's choices of ``scheme`` and each model's schemes come
+from it; the classes are imported when first used.
 """
 from __future__ import annotations
 
 import importlib
 
 from ..errors import Diverged, NewtonFailed
-
-#: scheme name -> (module in this package, class, model)
-REGISTRY = {
-    "explicit": ("explicit_euler", "ExplicitEuler", "A"),
-    "implicit": ("implicit_euler", "ImplicitEuler", "A"),
-    "bdf2": ("bdf2", "BDF2", "A"),
-    "vi": ("memory_vi", "MemoryVI", "B"),
-}
+from ..numerics import SCHEMES
 
 
 def scheme_class(name: str):
     """The class of the scheme called ``name``."""
-    module, cls, _ = REGISTRY[name]
-    return getattr(importlib.import_module(f"{__name__}.{module}"), cls)
+    entry = SCHEMES[name]
+    return getattr(importlib.import_module(f"{__name__}.{entry.module}"), entry.cls)
 
 
-def __getattr__(attr):  # ExplicitEuler, ImplicitEuler, MemoryVI, SCHEMES on first use
-    for name, (_, cls, _) in REGISTRY.items():
-        if attr == cls:
+def __getattr__(attr):  # ExplicitEuler, ImplicitEuler, MemoryVI on first use
+    for name, entry in SCHEMES.items():
+        if attr == entry.cls:
             return scheme_class(name)
-    if attr == "SCHEMES":
-        return {name: scheme_class(name) for name in REGISTRY}
     raise AttributeError(attr)
 
 
-__all__ = ["REGISTRY", "scheme_class", "Diverged", "NewtonFailed"]
+__all__ = ["scheme_class", "Diverged", "NewtonFailed"]

@@ -62,8 +62,8 @@ the state u, v and, for Model A, beta) from one time to the next. The time loop
 ``order``
     The order in k (step controllers and error estimates use it).
 
-Registration is one line in :data:`workbench.schemes.REGISTRY` (name -> module, class,
-model); the scene's allowed values of ``scheme`` and each model's schemes come from it.
+Registration is one line in :data:`workbench.numerics.SCHEMES` (name -> model, module,
+class); the scene's allowed values of ``scheme`` and each model's schemes come from it.
 """
 from __future__ import annotations
 

@@ -22,7 +22,7 @@ import warnings
 
 import numpy as np
 
-from .. import parallel, solvers, stability
+from .. import stability
 from ..errors import StepLimitExceeded
 from ..physics.ops import NP
 from .base import KelvinVoigtScheme
@@ -40,12 +40,7 @@ class ExplicitEuler(KelvinVoigtScheme):
     def __init__(self, disc):
         super().__init__(disc)
         d = self.d
-        if d.world.parallel:  # (several MPI processes: BDDC-preconditioned CG, or the factor gathered on rank 0)
-            method = "cg" if parallel.conjugate_gradients(d.scene) else "sparsecholesky"
-            self.solver = solvers.DistributedSolver(d.viscous.mat, d.viscous_pre, d.fes.FreeDofs(), d.u.vec, method)
-        else:
-            method = solvers.choose(d.scene["solver"], d.dim, d.ndof, iterative=True)
-            self.solver = solvers.factor(d.viscous.mat, d.fes.FreeDofs(), d.u.vec, method, fes=d.fes)
+        self.solver = d.viscous_solver(iterative=True)
         self.rhs = d.u.vec.CreateVector()
         self.rhs_np, self.v_np, self.u_np = self.rhs.FV().NumPy(), d.v.vec.FV().NumPy(), d.u.vec.FV().NumPy()
         self.work = d.u.vec.CreateVector()
@@ -82,7 +77,7 @@ class ExplicitEuler(KelvinVoigtScheme):
                        "stability_override": 0, "linear_solver": self.solver.name} | self.bonding_check(k_max)
         self._override = None
         if k_max > est.k_crit:
-            if not d.scene["allow_unstable"]:
+            if not d.numerics.allow_unstable:
                 stability.check(k_max, est, stability.critical_step(d, self.solver) if self.limit else None)
             self.checks["stability_override"] = 1
             self._override = (f"k = {k_max:.3g} s > predicted k_crit = {est.k_crit:.3g} s: running the explicit "
@@ -115,7 +110,7 @@ class ExplicitEuler(KelvinVoigtScheme):
                    f"limit is now k_crit = {est.k_crit:.3g} s (it was {first:.3g} s), below k = {k:.3g} s "
                    f"({est.describe()}). Ways out: k <= {0.9 * est.k_crit:.2g} s, or scheme = 'implicit' "
                    "(stable), or allow_unstable = true to run on (recorded)")
-        if not self.d.scene["allow_unstable"]:
+        if not self.d.numerics.allow_unstable:
             raise StepLimitExceeded(message + "; the steps computed so far are kept", time=t)
         self.checks["stability_override"] = 2
         warnings.warn(message + ": running on (allow_unstable)", RuntimeWarning, stacklevel=2)
@@ -134,7 +129,7 @@ class ExplicitEuler(KelvinVoigtScheme):
 
     def diagnostics(self) -> dict:
         """With solver = 'cg': the iterations of the last step's solve."""
-        if self.solver.name != "cg":
+        if not self.solver.iterative:
             return {}
         return {"cg_iterations": self.solver.last_iterations if self.k_last else 0}  # (0 at the start)
 
@@ -187,7 +182,7 @@ class ExplicitEuler(KelvinVoigtScheme):
             self.solver.solve(self.rhs_np, self.v_np)
             self.v_np += vc
         else:
-            if getattr(self.solver, "warm_start", False):
+            if self.solver.warm_start:
                 self._first_guess(k)
             self.solver.solve(self.rhs_np, self.v_np)
         u += k * self.v_np

@@ -190,7 +190,8 @@ class MemoryVI(Scheme):
 
     def preflight(self, k_max: float) -> dict:
         """Records how a general kernel was approximated by exponentials (its terms and error bound)."""
-        fit = getattr(self.d.model.memory, "fit", None)
+        memory = self.d.model.memory
+        fit = memory.fit if memory is not None else None
         return {} if fit is None else {"kernel_terms": fit["terms"], "kernel_fit_error": fit["error"]}
 
     # -- the operator of a step -------------------------------------------------------------------------------

@@ -19,7 +19,7 @@ import sys
 import numpy as np
 
 from ..errors import Diverged
-from ..parallel import SERIAL
+from ..world import SERIAL
 
 
 def time_grid(T: float, k: float, times=None, sync=()) -> np.ndarray:
@@ -198,10 +198,6 @@ class AdaptiveSteps:
     @property
     def t0(self) -> float:
         return self._t0
-
-    @property
-    def k_max_run(self) -> float:
-        return self.k_max
 
     @property
     def n_steps(self):
@@ -445,11 +441,7 @@ def march(disc, scheme, steps, recorder, *, progress=None, limit=None, limit_ori
     # a restarted run watches afresh: the watchers only stop a run (they never change its state), so the restart
     # delays the detection of an instability that began before it by at most their windows (12 and 20 steps)
     world = disc.world
-    owned = None
-    if world.parallel:
-        from ..parallel import owned as owned_dofs
-
-        owned = owned_dofs(disc.fes)
+    owned = disc.owned()
     watch = OscillationWatch(disc.v.vec.FV().NumPy(), [None] + ([disc.normal_dofs] if disc.dim > 1 else []),
                              world=world, owned=owned)
     chatter = ChatterWatch(lambda: disc.normal_displacement(u_np), world=world) if scheme.chatter_watch else None

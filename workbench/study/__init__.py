@@ -378,6 +378,3 @@ def cheapest(ds: xr.Dataset, tolerance: float, *, error: str = "error", cost: st
     sel = ds.isel(dict(zip(masked.dims, idx)))
     return {**{d: (v.item() if hasattr(v, "item") else v) for d, v in point.items()},
             "h": float(sel.h), "k": float(sel.k), error: float(sel[error]), cost: float(masked.values[idx])}
-
-
-BASE_AXES = BASE_AXES

@@ -31,16 +31,11 @@ from pathlib import Path
 
 import numpy as np
 
-from ..parameters import ParameterError
+from ..errors import ParameterError
+from ..numerics import REFINEMENT
 
 #: The axes every study has (length 1 when not swept), in dimension order.
 BASE_AXES = ("h", "k", "order", "scheme")
-#: Axes that change only the discretisation, not the modelled problem: cases that differ only in these
-#: share one reference run; any other swept parameter (c_nu, gamma_nu, ...) gets a reference of its own.
-DISCRETISATION = frozenset({"h", "k", "order", "scheme", "solver", "nx", "ny", "nz", "allow_unstable", "rtol", "atol",
-                            "k_min", "k_max", "memory_rule", "kernel_approximation", "kernel_tol", "h_contact"})
-#: Axes along which an observed order can be fitted (finest value = smallest).
-REFINEMENT = ("h", "k", "rtol", "h_contact")
 _PREFIX = {"h": "h", "k": "k", "order": "p", "scheme": ""}
 
 

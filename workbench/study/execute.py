@@ -23,6 +23,9 @@ import sys
 import warnings
 
 _HEADER = struct.Struct(">Q")
+#: A worker's whole program (:mod:`workbench.study.worker`; ``python -m workbench.study.worker`` would import
+#: ``workbench.study``, so xarray, first).
+START = "from workbench import threads; threads.lean_process(); from workbench.study.worker import main; main()"
 
 
 def run_case(scene, case_values, record_times, snapshots, extra_attrs, extend=None):
@@ -135,11 +138,10 @@ def subprocesses(tasks, n_workers: int):
     if not tasks:
         return
     n = max(1, min(n_workers, len(tasks)))
-    from ..parallel import alone
+    from ..threads import single_threaded
+    from ..world import alone
 
-    env = alone() | dict(OPENBLAS_NUM_THREADS="1", OMP_NUM_THREADS="1", MKL_NUM_THREADS="1")  # (a case each, alone)
-    from .worker import START
-
+    env = single_threaded(alone())  # (a case each, alone)
     workers = [subprocess.Popen([sys.executable, "-c", START, str(os.getpid())],
                                 stdin=subprocess.PIPE, stdout=subprocess.PIPE, env=env) for _ in range(n)]
     sel = selectors.DefaultSelector()

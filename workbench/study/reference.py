@@ -26,7 +26,8 @@ import numpy as np
 from .. import transfer
 from ..errors import ParameterError
 from ..results import far_facet
-from .cases import DISCRETISATION, Case
+from ..numerics import DISCRETISATION
+from .cases import Case
 
 
 def physics_of(case: Case) -> tuple:

@@ -1,5 +1,6 @@
-"""A study worker: ``python -c "$START" PARENT_PID`` (:data:`START`: a process of its own that runs scenes only, which
-skips dask before anything imports xarray: :func:`workbench._lean_process`).
+"""A study worker: ``python -c "$START" PARENT_PID`` (:data:`workbench.study.execute.START`: a process of its own
+that runs scenes only, which starts its BLAS pools with one thread and skips dask before anything imports xarray:
+:func:`workbench.threads.lean_process`).
 
 Reads tasks (pickled argument tuples of :func:`workbench.study.execute.run_case`)
 from standard input, answers each with ``("ok", Dataset)`` or ``("error",
@@ -14,10 +15,6 @@ import sys
 import threading
 import time
 import traceback
-
-
-#: The worker's whole program (``python -m workbench.study.worker`` would import ``workbench.study``, so xarray, first).
-START = "import workbench; workbench._lean_process(); from workbench.study.worker import main; main()"
 
 
 def _die_with_parent(parent: int) -> None:

@@ -18,7 +18,7 @@ Examples
 """
 from __future__ import annotations
 
-from ...parameters import Param
+from ...values import Param
 from ..contact import ContactTerm
 
 

@@ -1,201 +1,27 @@
-"""One case on several processes: ``mpirun -np N workbench run SCENE ...`` with NGSolve's MPI.
+"""The serial order of a body distributed over MPI processes: where each rank's dofs, contact facets and contact
+points stand in the one-process run, and rank 0's serial view of the body that records (:class:`Shell`).
 
-Rank 0 builds the body's mesh and sends it out (netgen's ``Distribute``): it then holds no
-cells (NGSolve's master), and ranks 1 ... N-1 hold a part each. Every rank builds the same
-model on its part and runs the same time loop:
-
-* the matrices are NGSolve's parallel matrices; u and v are kept *cumulated* (every copy
-  of a dof shared by ranks holds its value), right-hand sides *distributed* (each rank
-  holds its part of the sum);
-* the contact side's traces act on each rank's own facets: T u needs u cumulated, and
-  T^T (w p) is a distributed contribution, added with no communication;
-* the solve is NGSolve's conjugate gradients preconditioned by BDDC (``solver = 'auto'``
-  or ``'cg'``), warm started, or its sparse Cholesky factor gathered on rank 0
-  (``'sparsecholesky'``);
-* every decision the loop takes (the blow-up watchers, the step limit's re-check, its
-  estimate, a solve that fails) is reduced over the ranks, so all ranks take it together.
-
-Rank 0 also keeps a serial copy of the mesh with the discretisation's tables on it and no
-matrices (its *shell*). At each record it gathers u (v too at the snapshots) in the serial
-dof order and beta in the serial facet order, and records them with the serial code: the
-archive, which rank 0 writes, has the serial run's layout and numbers to the solver's
-tolerance (tests/test_parallel.py).
-
-What runs: Model A's explicit scheme, P1 or P2, in 2D and 3D, on any body whose contact side
-holds no pinned vertex; the archive, its plot and its VTK files are rank 0's. Refused by name
-before any work (:func:`check`): the other schemes and Model B (they condense on the contact
-dofs), the rod, higher orders, the banded and umfpack solvers. Restarts and checkpoints hold the
-state in the serial order (:meth:`Shell.serial_state`), so a distributed run's archive goes on with
-one process or with another number of ranks, and a one-process archive on several.
-
-Started without mpirun (or with one process) nothing here is used: :data:`SERIAL` stands in,
-and its reductions return their arguments.
+Rank 0 keeps a serial copy of the mesh with the discretisation's tables on it and no matrices. At each record it
+gathers u (v too at the snapshots) in the serial dof order and beta in the serial facet order, and records them with
+the serial code; restarts and checkpoints hold a state in the same order (:meth:`Shell.serial_state`), so that an
+archive goes on with any number of processes.
 """
 from __future__ import annotations
 
-import functools
-import os
-import sys
-
 import numpy as np
 
-from .errors import ParameterError
-
-#: The environment variables through which MPI launchers (MPICH's hydra and Intel MPI, Open MPI, MVAPICH) tell a
-#: process how many were started.
-SIZE_VARIABLES = ("PMI_SIZE", "OMPI_COMM_WORLD_SIZE", "MV2_COMM_WORLD_SIZE")
+from .. import discretisation
+from .algebra import owned
 
 
-def alone(environment=None) -> dict:
-    """A copy of the environment (default: this process's) without an MPI launcher's variables: a process started
-    from it runs alone (a study's worker), or under a launcher of its own."""
-    environment = os.environ if environment is None else environment
-    return {key: value for key, value in environment.items() if not key.startswith(("PMI_", "OMPI_", "MV2_", "PMIX_"))}
-
-
-class Serial:
-    """The stand-in for one process: every reduction returns its argument."""
-
-    parallel = False
-    rank, size, root = 0, 1, True
-
-    @staticmethod
-    def any(flag) -> bool:
-        return bool(flag)
-
-    @staticmethod
-    def max(value) -> float:
-        return value
-
-    @staticmethod
-    def sum(value) -> float:
-        return value
-
-
-SERIAL = Serial()
-
-
-class World:
-    """The ranks of one distributed case (mpi4py's COMM_WORLD) and the reductions the time loop takes."""
-
-    parallel = True
-
-    def __init__(self, comm):
-        from mpi4py import MPI
-
-        self.comm, self.MPI = comm, MPI
-        self.rank, self.size = comm.rank, comm.size
-        self.root = self.rank == 0
-
-    def any(self, flag) -> bool:
-        return bool(self.comm.allreduce(bool(flag), op=self.MPI.LOR))
-
-    def max(self, value: float) -> float:
-        """The largest over the ranks (a non-finite value on any rank gives inf: MPI's max of NaN is undefined)."""
-        value = float(value)
-        return self.comm.allreduce(value if np.isfinite(value) else np.inf, op=self.MPI.MAX)
-
-    def sum(self, value: float) -> float:
-        return self.comm.allreduce(float(value), op=self.MPI.SUM)
-
-    def bcast(self, obj):
-        return self.comm.bcast(obj, root=0)
-
-
-@functools.lru_cache(maxsize=None)
-def world():
-    """The :class:`World` when this process is one of several started by an MPI launcher, else :data:`SERIAL`."""
-    size = max(int(os.environ.get(name) or 1) for name in SIZE_VARIABLES)
-    if size <= 1:
-        return SERIAL
-    try:
-        from mpi4py import MPI
-    except ImportError:
-        raise ParameterError(f"started by an MPI launcher with {size} processes, but mpi4py is not installed: "
-                             "pip install mpi4py (and an MPI, e.g. pip install mpich)") from None
-    return World(MPI.COMM_WORLD) if MPI.COMM_WORLD.size > 1 else SERIAL
-
-
-def abort_on_error() -> None:
-    """In an exception handler on one of several MPI processes: print the traceback and end every rank (MPI_Abort);
-    otherwise nothing. (A Python script gets the same from ``mpiexec -n N python -m mpi4py script.py``.)"""
-    if not world.cache_info().currsize:  # (never asked for: no MPI in this process)
-        return
-    w = world()
-    if not w.parallel:
-        return
-    import traceback
-
-    traceback.print_exc()
-    print(f"error: rank {w.rank} of {w.size} failed (above); ending every rank", file=sys.stderr, flush=True)
-    w.comm.Abort(1)
-
-
-def check(scene, model) -> None:
-    """Refuse, by name and before any work, what does not run distributed (module docs)."""
-    w = world()
-    if not w.parallel:
-        return
-    why = None
-    if model.kind != "A" or scene["scheme"] != "explicit":
-        why = (f"scheme = {scene['scheme']!r} (Model {model.kind}): only Model A's explicit scheme runs on "
-               "several processes (the others condense on the contact dofs, one solve per contact dof)")
-    elif scene["solver"] not in ("auto", "cg", "sparsecholesky"):
-        why = (f"solver = {scene['solver']!r}: on several processes the solver is 'cg' (conjugate gradients "
-               "with BDDC; 'auto' takes it) or 'sparsecholesky' (the factor gathered on rank 0)")
-    elif model.geometry.pins_contact:
-        why = f"the {scene.geometry} body holds contact vertices (its apex): not on several processes"
-    elif scene.dim == 1:
-        why = "the rod (1D) does not run on several processes"
-    elif scene["order"] > 2:
-        why = (f"order = {scene['order']}: on several processes the displacement is P1 or P2 (the edge dofs of higher "
-               "orders depend on the edges' orientation on each rank)")
-    if why:
-        raise ParameterError(f"{scene.name} on {w.size} MPI processes: {why}; run it with one process")
-
-
-def conjugate_gradients(scene) -> bool:
-    """Whether a distributed run solves with BDDC-preconditioned CG (``solver = auto | cg``; else the factor gathered on
-    rank 0)."""
-    return world().parallel and scene["solver"] in ("auto", "cg")
-
-
-def distribute(geometry):
-    """(the mesh part of this rank, the whole serial mesh on rank 0 (None elsewhere))."""
-    import netgen.meshing as nm
-    import ngsolve as ngs
-
-    w = world()
-    if w.root:
-        serial = geometry.mesh()
-        return ngs.Mesh(serial.ngmesh.Copy().Distribute(w.comm)), serial
-    return ngs.Mesh(nm.Mesh.Receive(w.comm)), None
-
-
-def status(vector, distributed: bool) -> None:
-    """Mark an NGSolve vector written through NumPy as distributed (a rank's part of a sum) or cumulated."""
-    import ngsolve as ngs
-
-    s = ngs.la.PARALLEL_STATUS
-    vector.SetParallelStatus(s.DISTRIBUTED if distributed else s.CUMULATED)
-
-
-def cumulate(vector, values: np.ndarray) -> np.ndarray:
-    """Values per local dof that are a rank's part of a sum, summed over the ranks that share each dof (through
-    ``vector``, an NGSolve vector of the space used as work space)."""
-    arr = vector.FV().NumPy()
-    arr[:] = values
-    status(vector, True)
-    vector.Cumulate()
-    return arr.copy()
-
-
-def owned(fes) -> np.ndarray:
-    """True at the local dofs this rank owns (each shared dof has one owner): sums over owned dofs count each once."""
-    pardofs = fes.ParallelDofs()
-    if pardofs is None:
-        return np.ones(fes.ndof, dtype=bool)
-    return np.array(pardofs.MasterDofs(), dtype=bool)
+def serial_shell(d, mesh):
+    """The tables of the distributed discretisation ``d`` on the serial ``mesh``, without its matrices: what rank 0
+    records through."""
+    shell = discretisation.Discretisation(d.model, d.scene, mesh,
+                                          discretisation.vector_space(d.model.geometry, mesh, d.numerics.order),
+                                          d.numerics)
+    discretisation.assemble(shell, matrices=False)
+    return shell
 
 
 class Order:
@@ -249,14 +75,10 @@ class Shell:
     def __init__(self, d, serial_mesh):
         import ngsolve as ngs
 
-        self.w, self.local = world(), d
+        self.w, self.local = d.world, d
         comm = self.w.comm
         fes, mesh, dim = d.fes, d.mesh, d.dim
-        shell = None
-        if self.w.root:
-            from .discretisation import serial_shell
-
-            shell = serial_shell(d.model, d.scene, serial_mesh)
+        shell = serial_shell(d, serial_mesh) if self.w.root else None
         self.disc = shell
         numbers = _serial_numbers(comm, d.vertex_xyz, shell.vertex_xyz if shell else None, "vertex")
         mine = owned(fes)
@@ -268,7 +90,7 @@ class Shell:
         # the dofs of each local vertex (and P2 edge) and their serial counterparts, found on rank 0
         edges = np.zeros((0, 2), dtype=np.int64)
         edofs = np.zeros((0, dim), dtype=np.int64)
-        if d.scene["order"] > 1 and mesh.nedge:
+        if d.numerics.order > 1 and mesh.nedge:
             edges = np.sort(numbers[np.array([[v.nr for v in e.vertices] for e in mesh.edges], dtype=np.int64)],
                             axis=1)
             edofs = np.array([fes.GetDofNrs(ngs.NodeId(ngs.EDGE, e)) for e in range(mesh.nedge)],
@@ -278,7 +100,7 @@ class Shell:
         serial_dofs = None
         if self.w.root:
             edge_of = ({tuple(sorted(v.nr for v in e.vertices)): e.nr for e in shell.mesh.edges}
-                       if d.scene["order"] > 1 else {})
+                       if d.numerics.order > 1 else {})
             serial_dofs = []
             for nums, edg in plans:
                 te = (np.array([shell.fes.GetDofNrs(ngs.NodeId(ngs.EDGE, edge_of[tuple(p)])) for p in edg],

@@ -1,0 +1,122 @@
+"""How a problem is discretised and solved, apart from what is modelled: the numerical options as one object.
+
+A scene's values hold physics and numerics side by side (one table of parameters, :mod:`workbench.parameters`);
+this module is the one place that says which of them are numerics, and the one registry of the time schemes.
+:class:`Numerics` is built beside the model from a scene (:func:`from_scene`), frozen, and is what the schemes,
+the solvers, the runner, restarts and studies consult: the scheme and its step control, the element order, the
+linear solver, the memory rule, whether an unstable explicit step is allowed, the threads.
+
+Examples
+--------
+>>> import workbench
+>>> n = from_scene(workbench.scene("tp2", scheme="bdf2", rtol=1e-4))
+>>> n.scheme, n.adaptive, n.largest_step
+('bdf2', True, 1.0)
+>>> sorted(set(DISCRETISATION) & {"h", "k", "gamma_nu"})
+['h', 'k']
+"""
+from __future__ import annotations
+
+from dataclasses import dataclass, fields
+from typing import NamedTuple
+
+
+class Registered(NamedTuple):
+    """A time scheme's entry in :data:`SCHEMES`: the model it steps, its module in :mod:`workbench.schemes` and its
+    class, and what it can do (what the scene checks before any work)."""
+
+    model: str
+    module: str
+    cls: str
+    #: Whether it takes error-controlled steps (``rtol > 0``): it estimates its local error.
+    error_control: bool = True
+    #: Whether its systems may be solved iteratively (``solver = 'cg'``): one constant matrix, no condensation.
+    iterative: bool = False
+    #: Whether it runs on a body distributed over several MPI processes.
+    distributed: bool = False
+
+
+#: The time schemes by name. Registering a scheme is one line here; the scene's choices of ``scheme``, each model's
+#: schemes and the checks of what a scheme can do come from it.
+SCHEMES = {
+    "explicit": Registered("A", "explicit_euler", "ExplicitEuler", error_control=False, iterative=True,
+                           distributed=True),
+    "implicit": Registered("A", "implicit_euler", "ImplicitEuler"),
+    "bdf2": Registered("A", "bdf2", "BDF2"),
+    "vi": Registered("B", "memory_vi", "MemoryVI"),
+}
+
+#: The element size and order (a geometry adds its cell counts, ``nx`` ..., and a Hertz body ``h_contact``).
+SPACE = ("h", "order")
+#: The time scheme, its step and the linear solver of its systems.
+TIME = ("k", "scheme", "solver")
+#: Error-controlled steps (``rtol > 0``): the tolerances and the bounds of the step.
+CONTROL = ("rtol", "atol", "k_min", "k_max")
+#: The explicit scheme's stability override.
+EXPLICIT = ("allow_unstable",)
+#: Model B: the rule of the memory integral and the approximation of a general kernel.
+MEMORY = ("memory_rule", "kernel_approximation", "kernel_tol")
+#: The mesh options a geometry may add to SPACE.
+MESH = ("nx", "ny", "nz", "h_contact")
+
+#: Every numerical option: two runs that differ only in these model the same problem (a study compares them with
+#: one reference; any other difference is physics).
+DISCRETISATION = frozenset(SPACE + TIME + CONTROL + EXPLICIT + MEMORY + MESH)
+#: The options along which a study fits an observed order (the finest value is the smallest).
+REFINEMENT = ("h", "k", "rtol", "h_contact")
+
+
+def schemes_of(model: str) -> tuple:
+    """The scheme names a model (``"A"`` or ``"B"``) can run."""
+    return tuple(name for name, entry in SCHEMES.items() if entry.model == model)
+
+
+def is_adaptive(rtol):
+    """Whether steps are error-controlled at the tolerance ``rtol`` (also for an array of tolerances): rtol > 0."""
+    import numpy as np
+
+    out = np.asarray(rtol, dtype=float) > 0
+    return bool(out) if out.ndim == 0 else out
+
+
+@dataclass(frozen=True)
+class Numerics:
+    """The numerical options of one run (module docs).
+
+    ``k`` is the fixed step, or with error control (``rtol > 0``) the first step; ``k_max = 0`` means T.
+    ``threads``: NGSolve's TaskManager threads for the setup and the time loop (None: none).
+    """
+
+    scheme: str
+    k: float
+    T: float
+    order: int = 1
+    solver: str = "auto"
+    rtol: float = 0.0
+    atol: float = 1e-9
+    k_min: float = 1e-9
+    k_max: float = 0.0
+    allow_unstable: bool = False
+    memory_rule: str = "rectangle"
+    threads: int | None = None
+
+    @property
+    def adaptive(self) -> bool:
+        """Whether the steps are error-controlled."""
+        return is_adaptive(self.rtol)
+
+    @property
+    def largest_step(self) -> float:
+        """The largest step error control may take (``k_max``, or T when it is 0)."""
+        return self.k_max or self.T
+
+
+def from_values(values: dict, threads: int | None = None) -> Numerics:
+    """The numerics of checked scene values (the options a scene does not have keep their defaults)."""
+    names = {f.name for f in fields(Numerics)} - {"threads"}
+    return Numerics(**{name: values[name] for name in names if name in values}, threads=threads)
+
+
+def from_scene(scene, threads: int | None = None) -> Numerics:
+    """The numerics of a checked scene (:class:`workbench.scenes.Scene`)."""
+    return from_values(scene.values, threads)

@@ -1,0 +1,204 @@
+"""One case on several processes: ``mpiexec -n N workbench run SCENE ...`` with NGSolve's MPI.
+
+Parallelism is a property of the data here: a body distributed over the processes is a
+:class:`DistributedDiscretisation`, which carries its :class:`World` (the communicator and its
+reductions) and overrides the few methods of :class:`workbench.discretisation.Discretisation` that
+depend on where the data lives (the solver of K_A, the step limit's operators, the dofs a rank
+counts, the state gathered into and scattered from the serial order, the recorder). The time loop,
+the step limit, restarts and the schemes call those methods and never ask how many processes run.
+
+Rank 0 builds the body's mesh and sends it out (netgen's ``Distribute``): it then holds no
+cells (NGSolve's master), and ranks 1 ... N-1 hold a part each. Every rank builds the same
+model on its part and runs the same time loop:
+
+* the matrices are NGSolve's parallel matrices; u and v are kept *cumulated* (every copy
+  of a dof shared by ranks holds its value), right-hand sides *distributed* (each rank
+  holds its part of the sum) (:mod:`.algebra`);
+* the contact side's traces act on each rank's own facets: T u needs u cumulated, and
+  T^T (w p) is a distributed contribution, added with no communication;
+* the solve is NGSolve's conjugate gradients preconditioned by BDDC (``solver = 'auto'``
+  or ``'cg'``), warm started, or its sparse Cholesky factor gathered on rank 0
+  (``'sparsecholesky'``);
+* every decision the loop takes (the blow-up watchers, the step limit's re-check, its
+  estimate, a solve that fails) is reduced over the ranks, so all ranks take it together.
+
+Rank 0 also keeps a serial view of the body (:mod:`.order`): the archive, which rank 0 writes,
+has the serial run's layout and numbers to the solver's tolerance (tests/test_parallel.py).
+
+What runs: the schemes registered as ``distributed`` (:data:`workbench.numerics.SCHEMES`: Model A's
+explicit scheme), P1 or P2, in 2D and 3D, on any body whose contact side holds no pinned vertex; the
+archive, its plot and its VTK files are rank 0's. Refused by name before any work (:func:`check`):
+the other schemes (they condense on the contact dofs), the rod, higher orders, the banded and
+umfpack solvers. Restarts and checkpoints hold the state in the serial order, so a distributed run's
+archive goes on with one process or with another number of ranks, and a one-process archive on
+several.
+
+Started without a launcher (or with one process) :func:`world` is :data:`workbench.world.SERIAL`
+and :func:`discretise` builds the one-process discretisation.
+"""
+from __future__ import annotations
+
+import functools
+import sys
+
+import numpy as np
+
+from .. import discretisation
+from ..errors import ParameterError
+from ..numerics import SCHEMES
+from ..world import SERIAL, Serial, launched
+from .algebra import DistributedOperators, DistributedSolver, owned
+from .order import GatheringRecorder, Shell
+
+
+class World(Serial):
+    """The ranks of one distributed case (mpi4py's COMM_WORLD) and the reductions the time loop takes."""
+
+    parallel = True
+
+    def __init__(self, comm):
+        from mpi4py import MPI
+
+        self.comm, self.MPI = comm, MPI
+        self.rank, self.size = comm.rank, comm.size
+        self.root = self.rank == 0
+
+    def any(self, flag) -> bool:
+        return bool(self.comm.allreduce(bool(flag), op=self.MPI.LOR))
+
+    def max(self, value: float) -> float:
+        """The largest over the ranks (a non-finite value on any rank gives inf: MPI's max of NaN is undefined)."""
+        value = float(value)
+        return self.comm.allreduce(value if np.isfinite(value) else np.inf, op=self.MPI.MAX)
+
+    def sum(self, value: float) -> float:
+        return self.comm.allreduce(float(value), op=self.MPI.SUM)
+
+    def bcast(self, obj):
+        return self.comm.bcast(obj, root=0)
+
+
+@functools.lru_cache(maxsize=None)
+def world():
+    """The :class:`World` when this process is one of several started by an MPI launcher, else
+    :data:`workbench.world.SERIAL`."""
+    size = launched()
+    if size <= 1:
+        return SERIAL
+    try:
+        from mpi4py import MPI
+    except ImportError:
+        raise ParameterError(f"started by an MPI launcher with {size} processes, but mpi4py is not installed: "
+                             "pip install mpi4py (and an MPI, e.g. pip install mpich)") from None
+    return World(MPI.COMM_WORLD) if MPI.COMM_WORLD.size > 1 else SERIAL
+
+
+def abort_on_error() -> None:
+    """In an exception handler on one of several MPI processes: print the traceback and end every rank (MPI_Abort);
+    otherwise nothing. (A Python script gets the same from ``mpiexec -n N python -m mpi4py script.py``.)"""
+    if not world.cache_info().currsize:  # (never asked for: no MPI in this process)
+        return
+    w = world()
+    if not w.parallel:
+        return
+    import traceback
+
+    traceback.print_exc()
+    print(f"error: rank {w.rank} of {w.size} failed (above); ending every rank", file=sys.stderr, flush=True)
+    w.comm.Abort(1)
+
+
+def check(scene, model, numerics) -> None:
+    """Refuse, by name and before any work, what does not run distributed (module docs)."""
+    w = world()
+    if not w.parallel:
+        return
+    why = None
+    if not SCHEMES[numerics.scheme].distributed:
+        runs = ", ".join(repr(n) for n, e in SCHEMES.items() if e.distributed)
+        why = (f"scheme = {numerics.scheme!r} (Model {model.kind}): only the scheme(s) {runs} run on several processes "
+               "(the others condense on the contact dofs, one solve per contact dof)")
+    elif numerics.solver not in ("auto", "cg", "sparsecholesky"):
+        why = (f"solver = {numerics.solver!r}: on several processes the solver is 'cg' (conjugate gradients "
+               "with BDDC; 'auto' takes it) or 'sparsecholesky' (the factor gathered on rank 0)")
+    elif model.geometry.pins_contact:
+        why = f"the {scene.geometry} body holds contact vertices (its apex): not on several processes"
+    elif model.geometry.dim == 1:
+        why = "the rod (1D) does not run on several processes"
+    elif numerics.order > 2:
+        why = (f"order = {numerics.order}: on several processes the displacement is P1 or P2 (the edge dofs of higher "
+               "orders depend on the edges' orientation on each rank)")
+    if why:
+        raise ParameterError(f"{scene.name} on {w.size} MPI processes: {why}; run it with one process")
+
+
+def discretise(model, scene, numerics):
+    """The discretisation of a model on the processes this one runs with: one process, or this rank's part of a body
+    distributed over several (:class:`DistributedDiscretisation`)."""
+    w = world()
+    if not w.parallel:
+        return discretisation.build(model, scene, numerics)
+    return DistributedDiscretisation(model, scene, numerics, w)
+
+
+class DistributedDiscretisation(discretisation.Discretisation):
+    """This rank's part of a body distributed over MPI processes (module docs), with rank 0's serial view
+    (``shell``, :class:`workbench.parallel.order.Shell`)."""
+
+    def __init__(self, model, scene, numerics, world_):
+        self.world = world_
+        import ngsolve as ngs
+
+        geometry = model.geometry
+        if world_.root:  # rank 0 keeps the serial mesh for its shell and sends the parts out
+            serial_mesh = geometry.mesh()
+            mesh = ngs.Mesh(serial_mesh.ngmesh.Copy().Distribute(world_.comm))
+        else:
+            import netgen.meshing as nm
+
+            serial_mesh, mesh = None, ngs.Mesh(nm.Mesh.Receive(world_.comm))
+        fes = discretisation.vector_space(geometry, mesh, numerics.order)
+        self.conjugate_gradients = numerics.solver in ("auto", "cg")
+        if self.conjugate_gradients:
+            _vertex_wirebasket(fes, geometry.dim, mesh.nv)
+        super().__init__(model, scene, mesh, fes, numerics)
+        self.viscous_pre = None
+        discretisation.assemble(self, preconditioner="bddc" if self.conjugate_gradients else None)
+        self.shell = Shell(self, serial_mesh)
+
+    @property
+    def ndof_global(self) -> int:
+        return self.fes.ndofglobal
+
+    def owned(self):
+        return owned(self.fes)
+
+    def viscous_solver(self, iterative: bool = True):
+        """NGSolve's CG with BDDC, or the sparse factor gathered on rank 0 (``solver = 'sparsecholesky'``)."""
+        method = "cg" if self.conjugate_gradients else "sparsecholesky"
+        return DistributedSolver(self.viscous.mat, self.viscous_pre, self.fes.FreeDofs(), self.u.vec, method)
+
+    def springs(self, solver):
+        return DistributedOperators(self, solver)
+
+    def gather_state(self, state: dict, layout: dict):
+        return self.shell.serial_state(state, layout)
+
+    def scatter_state(self, state: dict, layout: dict) -> dict:
+        return self.shell.local_state(state, layout)
+
+    def recording(self, make):
+        """Every rank sends its part at the record times of rank 0's recorder, which records the serial view."""
+        return GatheringRecorder(self.shell, make(self.shell.disc) if self.world.root else None)
+
+
+def _vertex_wirebasket(fes, dim: int, nv: int) -> None:
+    """BDDC's coarse problem on the vertex dofs only: every other dof (P2: the edges') an interface dof. With the
+    default wirebasket, vertices and edges, the coarse problem of P2 is the whole system, factored on rank 0 (the P2
+    block at 271k dofs on 3 processes: 5.1 GB on rank 0, 2 CG iterations); with the vertices alone rank 0 holds
+    0.6 GB and every rank under 1 GB, at 77 iterations (studies/bench_mpi.py)."""
+    import ngsolve as ngs
+
+    per = fes.ndof // dim  # (each component's block: its vertex dofs first)
+    for c in range(dim):
+        fes.SetCouplingType(ngs.IntRange(c * per + nv, (c + 1) * per), ngs.COUPLING_TYPE.INTERFACE_DOF)

@@ -1,0 +1,62 @@
+"""Where a run's data lives: the processes that hold it, and the reductions its decisions take over them.
+
+Every discretisation carries its world (``disc.world``). On one process it is :data:`SERIAL`, whose reductions
+return their arguments; a body distributed over several MPI processes carries a
+:class:`workbench.parallel.World`, with the same methods reduced over the ranks. The time loop, the step limit and
+the schemes call these methods and never ask which world they have.
+
+This module holds no MPI code: it also says, from the environment alone, whether an MPI launcher started this
+process among others (:func:`launched`), and gives a worker process an environment without the launcher's
+variables (:func:`alone`).
+
+Examples
+--------
+>>> SERIAL.max(2.0), SERIAL.any(False), SERIAL.root
+(2.0, False, True)
+"""
+from __future__ import annotations
+
+import os
+
+#: The environment variables through which MPI launchers (MPICH's hydra and Intel MPI, Open MPI, MVAPICH) tell a
+#: process how many were started.
+SIZE_VARIABLES = ("PMI_SIZE", "OMPI_COMM_WORLD_SIZE", "MV2_COMM_WORLD_SIZE")
+
+
+class Serial:
+    """One process: every reduction returns its argument."""
+
+    parallel = False
+    rank, size, root = 0, 1, True
+
+    @staticmethod
+    def any(flag) -> bool:
+        return bool(flag)
+
+    @staticmethod
+    def max(value) -> float:
+        return value
+
+    @staticmethod
+    def sum(value) -> float:
+        return value
+
+    @staticmethod
+    def bcast(obj):
+        return obj
+
+
+SERIAL = Serial()
+
+
+def launched(environment=None) -> int:
+    """How many processes an MPI launcher started this one among (1 without a launcher)."""
+    environment = os.environ if environment is None else environment
+    return max(int(environment.get(name) or 1) for name in SIZE_VARIABLES)
+
+
+def alone(environment=None) -> dict:
+    """A copy of the environment (default: this process's) without an MPI launcher's variables: a process started
+    from it runs alone (a study's worker), or under a launcher of its own."""
+    environment = os.environ if environment is None else environment
+    return {key: value for key, value in environment.items() if not key.startswith(("PMI_", "OMPI_", "MV2_", "PMIX_"))}
