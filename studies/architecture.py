@@ -11,8 +11,9 @@ Figures (the table of issue 21):
 * modules besides ``parallel`` (and its own submodules) that import it or mpi4py;
 * string switches on the model kind (``.kind == "B"``, ``.model == "A"``, ...);
 * the largest class and function (lines, decorators excluded);
-* literal lists of numerical-option names: a tuple, list, set or frozenset of at least two string constants, all of
-  them names of numerical options (``k``, ``scheme``, ``rtol``, ...), outside ``numerics`` where the one list lives;
+* literal lists of numerical-option names defined at module or class level (a definition of which parameters are
+  numerics): a tuple, list, set or frozenset of at least two string constants, all of them names of numerical options
+  (``k``, ``scheme``, ``rtol``, ...), outside ``numerics`` where the one list lives;
 * "adaptive iff rtol > 0" written: comparisons of an ``rtol`` against 0;
 * ``getattr``/``hasattr`` with a literal attribute name on an object (protocol probes); calls on the command line's
   argparse namespace (``args``), in a module's ``__getattr__`` and on a module object are not probes;
@@ -41,16 +42,16 @@ NUMERICAL_NAMES = {"h", "k", "T", "order", "scheme", "solver", "rtol", "atol", "
 LAYERS = [
     ("command line", {"cli", "__main__"}),
     ("paper", {"paper"}),
-    ("study", {"study"}),
-    ("references", {"references"}),
+    ("study and plots", {"study", "plotting"}),
     ("running", {"running", "runner", "restart", "parallel", "preflight"}),
-    ("output", {"output", "results", "plotting", "vtk", "files"}),
+    ("output", {"output", "results", "vtk", "files"}),
     ("schemes", {"schemes"}),
     ("discretisation", {"discrete", "discretisation", "boundary", "condensation", "solvers", "stability", "eigen",
                         "transfer", "world"}),
-    ("scene input", {"input", "scenes", "geometry", "meshes", "models", "numerics"}),
+    ("scene input", {"input", "scenes", "geometry", "meshes", "models", "numerics", "parameters"}),
+    ("references", {"references"}),
     ("physics", {"physics"}),
-    ("base", {"parameters", "values", "expressions", "errors", "threads", "__init__"}),
+    ("base", {"values", "expressions", "errors", "threads", "__init__"}),
 ]
 
 
@@ -163,6 +164,11 @@ def measure(root: Path = ROOT) -> dict:
     for name, f in mods.items():
         src = f.read_text()
         tree = ast.parse(src)
+        for scope in [tree] + [n for n in ast.walk(tree) if isinstance(n, ast.ClassDef)]:
+            for statement in scope.body:
+                if isinstance(statement, (ast.Assign, ast.AnnAssign)) and statement.value is not None:
+                    for sub in ast.walk(statement.value):
+                        sub._defined = True  # noqa: SLF001
         for i, line in enumerate(src.splitlines(), 1):
             if re.search(r"\.(kind|model)\s*[!=]=\s*['\"](A|B)['\"]", line):
                 switches.append(f"{name}:{i}")
@@ -171,7 +177,8 @@ def measure(root: Path = ROOT) -> dict:
                 classes.append((node.end_lineno - node.lineno + 1, f"{name}.{node.name}"))
             if isinstance(node, (ast.FunctionDef, ast.AsyncFunctionDef)):
                 functions.append((node.end_lineno - node.lineno + 1, f"{name}.{node.name}"))
-            if isinstance(node, (ast.Tuple, ast.List, ast.Set)) and name != f"{PACKAGE}.numerics":
+            if isinstance(node, (ast.Tuple, ast.List, ast.Set)) and name != f"{PACKAGE}.numerics" \
+                    and getattr(node, "_defined", False):
                 strings = [e.value for e in node.elts if isinstance(e, ast.Constant) and isinstance(e.value, str)]
                 if len(strings) >= 2 and len(strings) == len(node.elts) and set(strings) <= NUMERICAL_NAMES \
                         and len(set(strings) & {"k", "rtol", "scheme", "atol", "k_min", "k_max", "solver"}) >= 2:

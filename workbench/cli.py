@@ -61,7 +61,9 @@ def _overrides(args, swept=()) -> dict:
         if name in out:
             raise ParameterError(f"--set {name} is given twice ({out[name]!r} and {value.strip()!r}); give it once")
         out[name] = value.strip()
-    for name in ("h", "k", "order", "scheme", "T"):
+    from .numerics import AXES
+
+    for name in AXES + ("T",):
         value = getattr(args, name, None)
         if value is None:
             continue
@@ -239,6 +241,9 @@ def _summary(ds) -> str:
 
 
 def _reference(text):
+    from .parameters import PARAMETERS
+    from .values import closest_name
+
     if text in (None, "finest", "ode", "exact"):
         return text or "finest"
     out = {}
@@ -246,13 +251,13 @@ def _reference(text):
         if "=" not in part:
             raise ParameterError(f"--reference {text!r}: give finest, ode, exact or e.g. h=0.003,k=0.0005")
         key, value = (s.strip() for s in part.split("=", 1))
-        if key in ("scheme", "solver"):
-            out[key] = value
-            continue
+        param = PARAMETERS.get(key)
+        if param is None:
+            raise ParameterError(f"--reference {text!r}: {key!r} is not a parameter" + closest_name(key, PARAMETERS))
         try:
-            out[key] = int(value) if key in ("order", "nx", "ny", "nz") else float(value)
-        except ValueError:
-            raise ParameterError(f"--reference {text!r}: {key} = {value!r} is not a number") from None
+            out[key] = param.check(value)
+        except ParameterError as err:
+            raise ParameterError(f"--reference {text!r}: {err}") from None
     return out
 
 
@@ -264,7 +269,8 @@ def cmd_study(args) -> int:
     from .study import Study
 
     _check_outputs(args, cases=True)
-    axes = ("h", "k", "order", "scheme")
+    from .numerics import AXES as axes
+
     overrides = _overrides(args, swept=axes)
     given = {name: getattr(args, name) for name in axes if getattr(args, name) is not None}
     st = Study(args.scene, k_over_h=args.k_over_h, reference=_reference(args.reference), n_compare=args.compare,

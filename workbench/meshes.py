@@ -98,15 +98,16 @@ def store(obj, h: float | None = None) -> Path:
 
     The file is named by the digest of its content and written atomically, so equal meshes share one file.
     """
+    import netgen.meshing as nm
     import ngsolve as ngs
 
-    if hasattr(obj, "GenerateMesh"):
+    if isinstance(obj, nm.NetgenGeometry):
         if h is None:
             raise ParameterError("mesh = a geometry: give h, the element size to mesh it with")
         ngmesh = obj.GenerateMesh(maxh=float(h))
     elif isinstance(obj, ngs.Mesh):
         ngmesh = obj.ngmesh
-    elif type(obj).__name__ == "Mesh" and hasattr(obj, "Save"):
+    elif isinstance(obj, nm.Mesh):
         ngmesh = obj
     else:
         raise ParameterError(f"mesh = {type(obj).__name__} object: give a mesh file path (.msh, .vol), a netgen/OCC "

@@ -64,6 +64,8 @@ MESH = ("nx", "ny", "nz", "h_contact")
 DISCRETISATION = frozenset(SPACE + TIME + CONTROL + EXPLICIT + MEMORY + MESH)
 #: The options along which a study fits an observed order (the finest value is the smallest).
 REFINEMENT = ("h", "k", "rtol", "h_contact")
+#: The axes every study has (length 1 when not swept), and the command line's named options besides T.
+AXES = ("h", "k", "order", "scheme")
 
 
 def schemes_of(model: str) -> tuple:

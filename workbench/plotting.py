@@ -13,6 +13,8 @@ import matplotlib.ticker
 import numpy as np
 from matplotlib.figure import Figure
 
+from .numerics import is_adaptive
+
 #: A perceptually uniform colour map for fields (not jet).
 FIELD_CMAP = "viridis"
 
@@ -182,7 +184,7 @@ def tolerance(study_ds, path=None, error="error", cost="wall_time"):
     fig, (left, right) = figure(1, 2, figsize=(9, 3.8))
     for sel in _combinations(err_all, ["rtol"]):
         y, c = np.ravel(err_all.sel(sel).values), np.ravel(c_all.sel(sel).values)
-        good = np.isfinite(y) & (y > 0) & (rtol > 0)
+        good = np.isfinite(y) & (y > 0) & is_adaptive(rtol)
         if not good.any():
             continue
         label = _label(sel) or "cases"
@@ -190,7 +192,7 @@ def tolerance(study_ds, path=None, error="error", cost="wall_time"):
         right.loglog(y[good], c[good], "o-", label=label)
         for x, yy, cc in zip(rtol[good], y[good], c[good]):
             right.annotate(f"{x:g}", (yy, cc), xytext=(3, 3), textcoords="offset points", fontsize=6)
-    lo, hi = rtol[rtol > 0].min(), rtol.max()
+    lo, hi = rtol[is_adaptive(rtol)].min(), rtol.max()
     grid = np.array([lo, hi])
     for factor, style in ((1.0, "-"), (0.1, ":"), (10.0, ":")):
         left.loglog(grid, factor * grid, style, color="gray", lw=0.8)
@@ -211,7 +213,7 @@ def _kinds(index, names):
     if not keys:
         return [("cases", np.ones(len(index), dtype=bool), "o")]
     scheme = np.asarray(index.get_level_values("scheme")) if "scheme" in keys else np.full(len(index), "")
-    adaptive = np.asarray(index.get_level_values("rtol"), dtype=float) > 0 if "rtol" in keys \
+    adaptive = is_adaptive(index.get_level_values("rtol")) if "rtol" in keys \
         else np.zeros(len(index), dtype=bool)
     out = []
     for name in dict.fromkeys(scheme):

@@ -38,7 +38,7 @@ from pathlib import Path
 import numpy as np
 import xarray as xr
 
-from . import results, scenes
+from . import numerics, results, scenes
 from .errors import ParameterError
 
 PREFIX = "state_"
@@ -294,7 +294,7 @@ def check(path, archive: xr.Dataset, state: dict, scene, model_terms) -> None:
                              f"(kernel_approximation = 'exponentials'), and T = {scene['T']:g} would need another fit, "
                              "whose memory histories the archive does not hold: run again from 0 to the new T (or with "
                              "the quadrature)")
-    if longer and scene.values.get("rtol", 0) > 0 and archive.attrs.get("status") != "checkpoint":
+    if longer and numerics.from_scene(scene).adaptive and archive.attrs.get("status") != "checkpoint":
         warnings.warn(f"restart {str(path)!r}: the error-controlled run landed on its own T = {old['T']:g} s, which a "
                       f"run straight to T = {scene['T']:g} does not: the continued steps differ from that run's (the "
                       "result meets the same tolerance, not bitwise)", RuntimeWarning, stacklevel=3)

@@ -147,6 +147,7 @@ class Transfer:
         self.method = "nested prolongation (exact)" if self.exact else "interpolation (meshes not nested)"
         same = coarse is fine
         self.identity = same
+        self.P = None  # P1 on both: the vertex interpolation matrix (else NGSolve interpolates)
         if same:
             return
         if coarse.order == 1 and fine.order == 1:
@@ -178,7 +179,7 @@ class Transfer:
         if self.identity:
             return u_dofs
         c, f = self.coarse, self.fine
-        if hasattr(self, "P"):
+        if self.P is not None:
             vals = self.P @ u_nodes  # (fine vertex, component)
             out = np.zeros(f.fes.ndof)
             per = f.fes.ndof // f.dim

@@ -14,6 +14,10 @@ from __future__ import annotations
 import difflib
 import json
 import math
+import numbers
+from collections.abc import Iterable
+
+import numpy as np
 from dataclasses import dataclass
 
 from .errors import ParameterError
@@ -74,7 +78,9 @@ class Param:
                     value = float(value.strip())
                 except ValueError:
                     raise ParameterError(f"{name} = {value!r} is not a number") from None
-            if isinstance(value, bool) or not isinstance(value, (int, float)) and not hasattr(value, "__float__"):
+            if isinstance(value, np.ndarray) and value.ndim == 0:  # (a NumPy scalar result)
+                value = value.item()
+            if isinstance(value, bool) or not isinstance(value, numbers.Real):
                 raise ParameterError(f"{name} = {value!r} is not a number")
             value = float(value)
             if not math.isfinite(value):
@@ -155,7 +161,7 @@ def _times(name, value):
     if isinstance(value, str):  # "0.1, 0.2", or as `workbench show` prints a list: "[0.1, 0.2]"
         value = [v for v in value.strip().strip("[]()").replace(";", ",").split(",") if v.strip()]
     try:
-        ts = tuple(float(v) for v in (value if hasattr(value, "__iter__") else [value]))
+        ts = tuple(float(v) for v in (value if isinstance(value, Iterable) else [value]))
     except (TypeError, ValueError):
         raise ParameterError(f"{name} = {value!r}: expected a list of times") from None
     if any(not math.isfinite(t) or t < 0 for t in ts):

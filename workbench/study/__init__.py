@@ -18,12 +18,13 @@ from __future__ import annotations
 import tempfile
 import time
 import warnings
+from collections.abc import Iterable
 from pathlib import Path
 
 import numpy as np
 import xarray as xr
 
-from .. import results, scenes
+from .. import numerics, results, scenes
 from ..errors import ParameterError
 from ..results import attr_value
 from . import evaluate, execute, reference
@@ -136,7 +137,7 @@ class Study:
 
     def _adaptive(self, case) -> bool:
         """Whether the case runs error-controlled steps (rtol > 0): its k is only the first step."""
-        return self.scene_of(case)["rtol"] > 0
+        return numerics.from_scene(self.scene_of(case)).adaptive
 
     def _times(self):
         """Common record times (the coarsest fixed grid, if on every fixed grid) and the field comparison times.
@@ -334,7 +335,7 @@ def _base_scene(scene, overrides, grid, couple):
     except ParameterError as alone:
         first = {}
         for name, values in grid.items():
-            if isinstance(values, (str, bytes)) or not hasattr(values, "__iter__"):
+            if isinstance(values, (str, bytes)) or not isinstance(values, Iterable):
                 values = [values]
             values = list(values)
             if not values:
@@ -376,5 +377,5 @@ def cheapest(ds: xr.Dataset, tolerance: float, *, error: str = "error", cost: st
     idx = np.unravel_index(flat, masked.shape)
     point = {d: masked[d].values[i] for d, i in zip(masked.dims, idx)}
     sel = ds.isel(dict(zip(masked.dims, idx)))
-    return {**{d: (v.item() if hasattr(v, "item") else v) for d, v in point.items()},
+    return {**{d: (v.item() if isinstance(v, np.generic) else v) for d, v in point.items()},
             "h": float(sel.h), "k": float(sel.k), error: float(sel[error]), cost: float(masked.values[idx])}

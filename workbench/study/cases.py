@@ -27,15 +27,15 @@ import itertools
 import json
 import math
 import re
+from collections.abc import Iterable
 from pathlib import Path
 
 import numpy as np
 
 from ..errors import ParameterError
-from ..numerics import REFINEMENT
+from ..numerics import AXES as BASE_AXES
+from ..numerics import REFINEMENT, is_adaptive
 
-#: The axes every study has (length 1 when not swept), in dimension order.
-BASE_AXES = ("h", "k", "order", "scheme")
 _PREFIX = {"h": "h", "k": "k", "order": "p", "scheme": ""}
 
 
@@ -100,7 +100,7 @@ def _values(name, values) -> list:
         values = [values]
     if isinstance(values, (str, bytes)):
         raise ParameterError(f"{name} = {values!r}: give the values to sweep as a list, e.g. {name}=[0.1, 0.05]")
-    if not hasattr(values, "__iter__"):
+    if not isinstance(values, Iterable):
         values = [values]
     values = list(values)
     if not values:
@@ -234,7 +234,7 @@ def extension(path: Path, expected: dict):
     if others or not T0 < T:
         return None, None
     tol = 1e-9 * max(1.0, T)
-    if float(b.get("rtol", 0.0)) > 0:
+    if is_adaptive(b.get("rtol", 0.0)):
         return None, "an error-controlled case is not continued to a longer T (its steps landed on its own T)"
     if b.get("kernel_approximation") == "exponentials":
         return None, "its kernel's exponential sum was fitted on [0, T], another fit for the longer T"
