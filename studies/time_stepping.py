@@ -105,7 +105,7 @@ def memory(steps):
     """Per-step wall times of the general kernel by quadrature and by exponential sums on memory_slab."""
     import workbench
     from workbench import discretisation
-    from workbench.runner import blas_single_threaded
+    from workbench.threads import blas_single_threaded
     from workbench.schemes import scheme_class
 
     k, out, finals = 1e-4, {}, {}

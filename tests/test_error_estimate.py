@@ -10,7 +10,7 @@ import math
 import numpy as np
 import pytest
 
-from workbench.schemes.base import Scheme
+from workbench.schemes.base import ErrorControlled
 from workbench.schemes.bdf2 import BDF2
 
 
@@ -22,7 +22,7 @@ class _Stub:
         self.history = [(t, np.array([math.exp(-t)]), None) for t in times]
 
     def estimate(self, t, u_n, order):
-        pred = Scheme.predictor(self, t, order)[0][0]
+        pred = ErrorControlled.predictor(self, t, order)[0][0]
         c = self.cls.error_constant(self, t, order)
         return c / (1 + c) * (u_n - pred)
 
@@ -43,7 +43,7 @@ def test_backward_euler_estimate_tends_to_local_error(ratios):
     for k in (1e-2, 1e-3):
         t1 = 0.4
         t0 = t1 - k / ratios[0]
-        stub = _Stub(Scheme, [t0, t1])
+        stub = _Stub(ErrorControlled, [t0, t1])
         u_n = _be(t1, k)
         out.append(stub.estimate(t1 + k, u_n, 1) / (u_n - math.exp(-(t1 + k))))
     assert abs(out[1] - 1) < 0.02 and abs(out[1] - 1) < abs(out[0] - 1) + 1e-3, out

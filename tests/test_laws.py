@@ -124,3 +124,71 @@ def test_contact_side_integrates_like_ngsolve(name, order):
     rate = np.empty(d.beta_dofs.size)
     rate[rs.element] = d.model.bonding.rate(NP, beta[d.beta_dofs][rs.element], rs.u_nu(u))
     np.testing.assert_allclose(rate, rate_ref, rtol=1e-12, atol=1e-14)
+
+
+@pytest.mark.parametrize("term", laws(), ids=lambda t: t.name)
+def test_every_jump_of_a_slope_is_a_declared_kink(term):
+    """A law declares its kinks (:meth:`ContactTerm.kinks`): wherever its normal or tangential slope jumps between
+    two neighbouring states on a fine line through the states (a change ten times those on either side: a steep but
+    continuous slope, as of a power law at its start, is no jump), one of its kink functions changes sign there (an
+    error-controlled run lands on those zeros; a kink it did not declare would be stepped over)."""
+    s = np.linspace(-0.7, 0.7, 14001)
+    beta = np.full(s.size, 0.8)
+    u_tau = np.stack([0.9 * s], axis=-1)  # |u_tau| passes L = 0.3 too
+    slopes = [term.normal_slope(NP, s, beta) * np.ones_like(s)]
+    if term.tangential:
+        slopes.append(term.tangential_slope(NP, u_tau, beta)[:, 0, 0])
+    kinks = term.kinks(s, u_tau)
+    declared = np.zeros(s.size - 1, dtype=bool)
+    for k in kinks:
+        declared |= np.sign(k[:-1]) != np.sign(k[1:])
+    for slope in slopes:
+        change = np.abs(np.diff(slope))
+        beside = np.maximum(np.r_[0.0, change[:-1]], np.r_[change[1:], 0.0])
+        jumps = (change > 1e-6 * (np.abs(slope).max() + 1e-300)) & (change > 10 * beside)
+        assert not (jumps & ~declared).any(), (term.name, s[:-1][jumps & ~declared][:5])
+    assert kinks or not any((np.abs(np.diff(sl)) > 0).any() for sl in slopes), f"{term.name} declares no kink"
+
+
+def test_an_adaptive_run_lands_on_the_kink_a_new_law_declares():
+    """A law of a user's own, with a kink no built-in law has (a foundation that stiffens at the penetration d), run
+    with error control on a rod pushed into it: the run ends a step at its kink (u_nu = d to 1e-7 of d at some
+    record), because the law says where it is; the same law without the declaration is stepped over (no record
+    within 30 x that)."""
+    import dataclasses
+
+    from workbench.physics.contact import Contact, ContactTerm
+
+    class Stiffening(ContactTerm):
+        name, rank, gapped = "stiffening", 15, True
+
+        def __init__(self, c, c2, d):
+            self.c, self.c2, self.d = c, c2, d
+
+        def normal(self, ops, u_nu, beta):
+            return self.c * ops.pos(u_nu) + self.c2 * ops.pos(u_nu - self.d)
+
+        def normal_slope(self, ops, u_nu, beta):
+            return self.c * ops.ifpos(u_nu, 1.0, 0.0) + self.c2 * ops.ifpos(u_nu - self.d, 1.0, 0.0)
+
+        def max_slope(self, beta0):
+            return self.c + self.c2, 0.0
+
+        def kinks(self, u_nu, u_tau):
+            return [u_nu, u_nu - self.d]
+
+    class Undeclared(Stiffening):
+        def kinks(self, u_nu, u_tau):
+            return []
+
+    sc = workbench.scene("rod", delta="0.2*t", u0="0", adhesion=False, scheme="implicit", k=0.01, rtol=1e-3,
+                         snapshots=())
+    d = 0.03
+    misses = []
+    for law in (Stiffening, Undeclared):
+        model = dataclasses.replace(sc.model_of(), contact=Contact([law(1.0, 10.0, d)]))
+        ds = workbench.run(sc, model=model, progress=False)
+        u_nu = ds.u_contact.isel(node=0, component=0).values  # (the rod's end: u_nu = u)
+        assert u_nu.max() > 1.5 * d  # the run passes the kink
+        misses.append(np.abs(u_nu - d).min())
+    assert misses[0] <= 1e-7 * d and misses[1] > 30 * misses[0], misses

@@ -48,7 +48,8 @@ FORMAT = 1
 #: What a restart may change: the final time and the output options.
 ALLOWED = ("T", "checkpoint_every")
 
-#: (units, long_name) of the state variables ('' units: in the scheme's own units, stated in the name).
+#: (units, long_name) of the state variables every scheme has (a scheme says what its own are:
+#: :attr:`workbench.schemes.base.Scheme.state_variables`).
 STATE_VARIABLES = {
     "u": ("m", "restart state: displacement dofs"),
     "v": ("m/s", "restart state: velocity dofs"),
@@ -56,11 +57,6 @@ STATE_VARIABLES = {
     "history_time": ("s", "restart state: times of the accepted states kept (predictors, multistep formulas)"),
     "history_u": ("m", "restart state: displacement dofs of the accepted states kept"),
     "history_beta": ("1", "restart state: bonding field of the accepted states kept"),
-    "histories": ("", "restart state: memory histories H_i (vi), dof vectors"),
-    "times": ("s", "restart state: times of the stored steps (vi, general kernel)"),
-    "stored": ("m", "restart state: stored displacement dofs u_j (vi, general kernel)"),
-    "states": ("1", "restart state: contact node states (vi): 0 separated, 1 stuck, 2 compliant, 3 rigid"),
-    "lam": ("", "restart state: contact node forces (vi)"),
 }
 
 
@@ -77,14 +73,15 @@ def capture(scheme, steps, recorder) -> dict:
     if state is None:
         return None
     return {"time": steps.t, "scheme_name": scheme.name, "scheme": state, "steps": steps.state(),
-            "recorder": recorder.state()}
+            "recorder": recorder.state(), "variables": scheme.state_variables}
 
 
 def attach(ds: xr.Dataset, state: dict) -> xr.Dataset:
     """``ds`` with ``state`` (:func:`capture`) as ``state_*`` variables and the ``state_json`` attribute."""
     arrays, meta = _encode(state)
+    described = STATE_VARIABLES | state.get("variables", {})
     for name, (dims, data) in arrays.items():
-        units, long_name = STATE_VARIABLES.get(name, ("", f"restart state: {name}"))
+        units, long_name = described.get(name, ("", f"restart state: {name}"))
         cf = {"long_name": long_name} | ({"units": units} if units else {})
         ds[PREFIX + name] = xr.Variable(dims, data, attrs=cf)
     ds.attrs[ATTR] = json.dumps(meta)

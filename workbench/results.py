@@ -119,7 +119,9 @@ def versions() -> dict:
 class Recorder:
     """Collects a run's records by time and builds the Dataset.
 
-    The time loop offers every step's end time (:meth:`record`); the recorder keeps
+    What it records of the state comes from ``observer`` (the scheme's,
+    :class:`workbench.schemes.base.Observer`). The time loop offers every step's end time
+    (:meth:`record`, the loop's callback); the recorder keeps
     t0, T, the ``record_times`` if given, else every step thinned to at most about
     ``max_records`` records (one whenever a (T / max_records)-long stretch has passed,
     whatever the step sizes; with ``every_step``, for error-controlled runs whose short
@@ -129,9 +131,9 @@ class Recorder:
     (a run continued with another solver: ``cg_iterations``) is NaN there.
     """
 
-    def __init__(self, disc, T: float, snapshots=(), record_times=None, max_records: int = 2000,
+    def __init__(self, disc, observer, T: float, snapshots=(), record_times=None, max_records: int = 2000,
                  every_step: bool = False):
-        self.disc = disc
+        self.disc, self.observer = disc, observer
         self.T = float(T)
         self.tol = 1e-9 * max(1.0, self.T)
         self.snapshot_times = sorted({float(t) for t in snapshots} | {self.T})
@@ -166,10 +168,10 @@ class Recorder:
                 seq[:] = [seq[i] for i in keep]
         self.stride *= 2
 
-    def record(self, t: float, scheme, final: bool = False, control=None) -> None:
+    def record(self, t: float, final: bool = False, control=None) -> None:
         """Offer the state at time t (the loop calls this after every step and after ``start``); ``control``:
         scalars of the step controller (an adaptive run's step size and error estimate)."""
-        self.take(t, scheme, *self.due(t, final), control=control)
+        self.take(t, *self.due(t, final), control=control)
 
     def due(self, t: float, final: bool = False) -> tuple:
         """(whether the state at t is recorded, whether its whole field is kept): the schedule, advanced by the offer
@@ -177,9 +179,9 @@ class Recorder:
         self.step += 1
         return self._wanted(t, final), any(abs(t - s) <= self.tol for s in self.snapshot_times)
 
-    def take(self, t: float, scheme, wanted: bool, snapshot: bool, control=None) -> None:
+    def take(self, t: float, wanted: bool, snapshot: bool, control=None) -> None:
         """Record the state at t as :meth:`due` said."""
-        d = self.disc
+        d, scheme = self.disc, self.observer
         if wanted:
             self.last = t
             self.times.append(t)
@@ -207,7 +209,7 @@ class Recorder:
             if self.every_step and len(self.times) > self.max_records:
                 self._decimate()
         if snapshot:
-            self.snapshot(t, scheme)
+            self.snapshot(t)
 
     def state(self) -> dict:
         """What the record schedule carries from step to step (the records themselves are the Dataset)."""
@@ -232,13 +234,13 @@ class Recorder:
                 edges = ds.u_edges.values[i] if "u_edges" in ds else None
                 self.snaps.append((float(t), ds.u_dofs.values[i], ds.stress.values[i], ds.von_mises.values[i], edges))
 
-    def snapshot(self, t: float, scheme) -> None:
+    def snapshot(self, t: float) -> None:
         """Keep the whole field: u, the P0 stress sigma_h = P_Q[...] and its von Mises norm."""
         from .physics.kelvin_voigt import stress_and_von_mises
 
         d = self.disc
-        stress, vm = stress_and_von_mises([(tensor, d.cell_strains(vector)) for tensor, vector in scheme.stress_parts()],
-                                          d.dim)
+        parts = [(tensor, d.cell_strains(vector)) for tensor, vector in self.observer.stress_parts()]
+        stress, vm = stress_and_von_mises(parts, d.dim)
         edges = d.edge_values() if d.numerics.order > 1 else None
         self.snaps.append((t, d.u.vec.FV().NumPy().copy(), stress, vm, edges))
 

@@ -197,8 +197,8 @@ class _Run:
             warnings.warn(message, RuntimeWarning, stacklevel=4)
         every = n.adaptive  # error-controlled runs keep every step (their short steps are where things happen)
         self.recorder = disc.recording(lambda d: results.Recorder(
-            d, sc["T"], sc["snapshots"], record_times, MAX_RECORDS_ADAPTIVE if every else MAX_RECORDS,
-            every_step=every))
+            d, scheme.observer(d), sc["T"], sc["snapshots"], record_times,
+            MAX_RECORDS_ADAPTIVE if every else MAX_RECORDS, every_step=every))
         if self.resume is not None:
             restarts.restore(self.resume.state, disc, scheme, self.steps, self.recorder, self.resume.archive)
         origin = f"limit = {limit:g} m, as given" if limit is not None else \
@@ -207,7 +207,7 @@ class _Run:
         failure = None
         with results.Clock() as self.clock, task_manager(n.threads):
             try:
-                march(disc, scheme, self.steps, self.recorder, progress=self.progress, limit=limit,
+                march(disc, scheme, self.steps, self.recorder.record, progress=self.progress, limit=limit,
                       limit_origin=origin, resume=self.resume is not None, after_step=self._after_step())
             except Diverged as err:
                 failure = err

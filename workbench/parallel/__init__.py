@@ -40,6 +40,7 @@ from __future__ import annotations
 
 import functools
 import sys
+import time
 
 import numpy as np
 
@@ -105,6 +106,7 @@ def abort_on_error() -> None:
 
     traceback.print_exc()
     print(f"error: rank {w.rank} of {w.size} failed (above); ending every rank", file=sys.stderr, flush=True)
+    time.sleep(0.5)  # (the launcher forwards the output asynchronously: an abort at once lost it on a loaded machine)
     w.comm.Abort(1)
 
 

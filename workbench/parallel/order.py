@@ -214,24 +214,20 @@ def _serial_points(comm, side, serial_side):
 
 class GatheringRecorder:
     """The recorder of a distributed run: at the times the schedule of rank 0's ``recorder`` (a
-    :class:`workbench.results.Recorder` of the shell; None on the other ranks) takes, every rank sends its part of u
-    (and of v at the snapshots) and of beta, and rank 0 records the shell with the serial code, through a copy of the
-    scheme that reads the shell."""
+    :class:`workbench.results.Recorder` of the shell with the scheme's observer of the shell; None on the other
+    ranks) takes, every rank sends its part of u (and of v at the snapshots) and of beta, and rank 0 records the
+    shell with the serial code."""
 
     def __init__(self, shell: Shell, recorder=None):
         self.shell, self.recorder, self.w = shell, recorder, shell.w
 
-    def record(self, t: float, scheme, final: bool = False, control=None) -> None:
+    def record(self, t: float, final: bool = False, control=None) -> None:
         due = self.w.bcast(self.recorder.due(t, final) if self.w.root else None)
         if not any(due):
             return
         self.shell.gather(velocity=due[1])
         if self.w.root:
-            import copy
-
-            view = copy.copy(scheme)
-            view.d = self.shell.disc
-            self.recorder.take(t, view, *due, control=control)
+            self.recorder.take(t, *due, control=control)
 
     def dataset(self, attrs: dict):
         """The Dataset (on rank 0)."""

@@ -62,6 +62,14 @@ class BondingLaw:
         new = np.where(active, b_star + (beta - b_star) * np.exp(-k * rate), beta)
         return np.clip(new, 0.0, 1.0)
 
+    def kinks(self, beta, u_nu) -> list:
+        """Functions of the state whose zeros are the law's kinks, at the facets: the onset of debonding (gamma_nu
+        beta R_b(u_nu)^2 = eps_a) and beta reaching 0 (NumPy)."""
+        from .ops import NP
+
+        r = self.r(NP, u_nu)
+        return [self.gamma_nu * beta * r * r - self.eps_a, beta]
+
     def fastest_rate(self, beta0: float) -> float:
         """1 / (the shortest debonding time scale) = gamma_nu L^2 beta0."""
         return self.gamma_nu * self.L ** 2 * beta0

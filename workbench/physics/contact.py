@@ -77,6 +77,12 @@ class ContactTerm:
         """The largest (normal, tangential) slopes over all states with beta <= beta0."""
         return 0.0, 0.0
 
+    def kinks(self, u_nu, u_tau) -> list:
+        """Functions of the state whose zeros are where this law switches branch (NumPy arrays over the contact
+        points; ``u_tau`` is None on the rod): an error-controlled run lands on them instead of stepping over a kink.
+        A smooth law has none (the default)."""
+        return []
+
 
 class Contact:
     """The sum of a scene's contact terms (in ``rank`` order)."""
@@ -142,6 +148,12 @@ class Contact:
             normal[t.side] = normal.get(t.side, 0.0) + s_nu
             tangential += s_tau
         return max(normal.values(), default=0.0), tangential
+
+    def kinks(self, u_nu, u_tau, gap0=None) -> list:
+        """The kinks of every term (:meth:`ContactTerm.kinks`), with u_nu less the initial gap for the terms that act
+        on the distance to the foundation."""
+        shifted = u_nu - gap0 if gap0 is not None else u_nu
+        return [k for t in self.terms for k in t.kinks(shifted if t.gapped else u_nu, u_tau)]
 
     def integrand(self, u_nu, u_tau, beta, w_nu, w_tau, gap0=None):
         """The NGSolve integrand of j(beta, u, w) (None when no term gives a traction; ``gap0`` a coefficient

@@ -1,7 +1,9 @@
-"""The scheme protocol: what every time scheme provides, and the parts they share.
+"""The scheme protocols: a stepper, its optional error control, and the observer that records.
 
-A scheme advances one :class:`~workbench.discretisation.Discretisation` (which holds
-the state u, v and, for Model A, beta) from one time to the next. The time loop
+A time scheme is three small things, each a protocol with its defaults here:
+
+:class:`Scheme`, the **stepper**, advances one :class:`~workbench.discretisation.Discretisation`
+(which holds the state u, v and, for Model A, beta) from one time to the next. The time loop
 (:func:`workbench.schemes.stepping.march`) calls, in this order:
 
 ``__init__(disc)``
@@ -28,52 +30,65 @@ the state u, v and, for Model A, beta) from one time to the next. The time loop
     histories, active sets), as copies; restoring it makes the scheme bitwise what it
     was (a rejected adaptive step is redone from it; a restart continues from it).
     ``restart=True`` adds what only a new process needs (``cache``: which step sizes
-    the cached factorisations were built from, :meth:`Scheme._cache_state`).
+    the cached factorisations were built from, :meth:`Scheme._cache_state`). What the
+    scheme keeps beyond u, v, beta and the history is its own (``extra``): it says
+    where those arrays live (:attr:`Scheme.distributed_layout`) and what they are
+    (:attr:`Scheme.state_variables`), so restarts archive them without knowing them.
+``diagnostics() -> dict``
+    Scalars of the last step (or of ``start``), recorded by name (units in
+    :data:`workbench.results.VARIABLES`).
+``observer(disc) -> Observer``
+    What the recorder reads at a time (below), for the scheme's state in ``disc``.
+
+:class:`ErrorControlled`, the **error control** (a scheme that takes error-controlled steps
+inherits it; the loop calls it only when ``rtol > 0``):
+
 ``local_error(rtol, atol) -> float``
     The scaled local error of the step just taken (<= 1: acceptable), from the
     difference to a predictor of the scheme's order; ``None`` when the history is
     too short to tell.
 ``event(state) -> (theta or None, crossed)``
     Where in the step just taken (0 < theta <= 1 of its length) the first event
-    happened: a kink crossed (a contact point or node changing branch, debonding
-    starting, beta reaching 0) by :data:`EVENT_FRACTION` of the contact boundary,
-    measured against ``state`` (the state at the step's start), None without one;
-    and ``crossed``, the largest share of the boundary whose laws switched inside the
-    step (0 for a scheme whose estimate does not see kinks).
+    happened: a kink crossed (the laws say where theirs are:
+    :meth:`workbench.physics.contact.ContactTerm.kinks`,
+    :meth:`workbench.physics.bonding.BondingLaw.kinks`) by :data:`EVENT_FRACTION` of the
+    contact boundary, measured against ``state`` (the state at the step's start), None
+    without one; and ``crossed``, the largest share of the boundary whose laws switched
+    inside the step (0 for a scheme whose estimate does not see kinks).
 ``admissible_step(k) -> float``
     The step (<= k) an error-controlled run takes instead of k: k itself, or for BDF2
     the step whose a0 lies on its grid (so that factorisations are met again).
-``diagnostics() -> dict``
-    Scalars of the last step (or of ``start``), recorded by name (units in
-    :data:`workbench.results.VARIABLES`).
-``node_values() -> dict``
-    Arrays per contact node (Model B: pressure and state); empty by default.
-``node_weights()``, ``contact_points()``, ``point_values() -> dict``
-    Each vertex's share of the side for those pressures; other contact points with unknowns
-    (Model B on P2: the facet midpoints, coordinates and weights) and arrays per point.
+
+:class:`Observer`, the **observer**, is what a run records of the state at a time (the
+runner hands the recorder to the loop as a callback, :class:`workbench.results.Recorder`):
+
+``diagnostics()``, ``node_values(t) -> dict``
+    The step's scalars; arrays per contact node (the contact pressure; Model B's state).
+``node_weights()``, ``contact_points()``, ``point_values(t) -> dict``
+    Each vertex's share of the side for those pressures; other contact points with
+    unknowns (Model B on P2: the facet midpoints, coordinates and weights) and arrays
+    per point.
 ``stress_parts() -> [(tensor, dof vector), ...]``
     sigma at the current state as a sum of linear tensors applied to the strains of
     dof vectors (Model A: A eps(v) + G eps(u); Model B: A eps(u) + the memory). The
-    recorder takes their P0 projection through the discretisation's strain operator;
-    :meth:`Scheme.stress` gives the same sum as a coefficient function.
-``chatter_watch``
-    Whether the loop watches the contact nodes for chatter (the explicit scheme's
-    unstable contact mode can bounce rather than alternate).
-``order``
-    The order in k (step controllers and error estimates use it).
+    recorder takes their P0 projection through the discretisation's strain operator.
+
+A run on several MPI processes records rank 0's serial view of the body: its observer is
+the scheme's observer of that view (``scheme.observer(view)``).
 
 Registration is one line in :data:`workbench.numerics.SCHEMES` (name -> model, module,
-class); the scene's allowed values of ``scheme`` and each model's schemes come from it.
+class, what it can do); the scene's allowed values of ``scheme`` and each model's schemes
+come from it.
 """
 from __future__ import annotations
 
-import numpy as np
+from functools import cached_property
 
-from ..physics import kelvin_voigt
+import numpy as np
 
 
 class Scheme:
-    """Base class with the protocol's defaults (see the module docs)."""
+    """The stepper (module docs) with its defaults."""
 
     name = ""
     order = 1
@@ -81,8 +96,11 @@ class Scheme:
     #: How many accepted states the history holds (enough for a quadratic predictor).
     keep = 4
     #: The arrays of :meth:`_extra_state` by what they live on, "dof" or "point" (a contact quadrature point's), for a
-    #: state gathered from several MPI processes into the serial order (:meth:`workbench.parallel.Shell.serial_state`).
+    #: state gathered from several MPI processes into the serial order.
     distributed_layout: dict = {}
+    #: (units, long_name) of the arrays of :meth:`_extra_state`, for the restart archive ('' units: the scheme's own,
+    #: said in the name).
+    state_variables: dict = {}
 
     def __init__(self, disc):
         self.d = disc
@@ -93,10 +111,21 @@ class Scheme:
     def preflight(self, k_max: float) -> dict:
         return {}
 
+    def warnings(self) -> list:
+        """Messages (text) the run should warn about, issued by the loop after every preflight check passed."""
+        return []
+
     def start(self, t0: float) -> None:
         return None
 
     def step(self, t_prev: float, t_next: float) -> None:
+        raise NotImplementedError
+
+    def diagnostics(self) -> dict:
+        return {}
+
+    def observer(self, disc=None) -> "Observer":
+        """What a run records of this scheme's state in ``disc`` (default: its own discretisation)."""
         raise NotImplementedError
 
     # -- the accepted history, the full state ------------------------------------------------------------
@@ -152,7 +181,11 @@ class Scheme:
     def _restore_cache(self, cache: list) -> None:
         return None
 
-    # -- error control -----------------------------------------------------------------------------------
+
+class ErrorControlled:
+    """The error control (module docs): local error estimates from a predictor of the scheme's order, events, the
+    admissible step. A mixin for a :class:`Scheme` (it reads the scheme's accepted history)."""
+
     def predictor(self, t: float, order: int | None = None):
         """(u, beta) at t extrapolated from the last ``order + 1`` accepted states (None if there are fewer)."""
         p = order or self.order
@@ -211,15 +244,13 @@ class Scheme:
             err = max(err, c * np.sqrt(np.sum(eb * (beta - pred[1]) ** 2) / np.sum(eb)) / rtol)
         return float(err)
 
-    @property
+    @cached_property
     def _free(self):
         """The dofs whose values the scheme computes (not the prescribed ones: their predictor mismatch is no error)."""
-        if not hasattr(self, "_free_dofs"):
-            d = self.d
-            mask = np.ones(d.ndof, dtype=bool)
-            mask[np.asarray(d.dirichlet_dofs, dtype=np.int64)] = False
-            self._free_dofs = np.flatnonzero(mask)
-        return self._free_dofs
+        d = self.d
+        mask = np.ones(d.ndof, dtype=bool)
+        mask[np.asarray(d.dirichlet_dofs, dtype=np.int64)] = False
+        return np.flatnonzero(mask)
 
     def admissible_step(self, k: float) -> float:
         """The step (<= k) an error-controlled run should take instead of k: k itself unless the scheme's operator
@@ -232,9 +263,15 @@ class Scheme:
         there, see :meth:`workbench.schemes.stepping.AdaptiveSteps.per_unit_step`)."""
         return None, 0.0
 
-    # -- what is recorded ---------------------------------------------------------------------------------
+
+class Observer:
+    """What a run records of a scheme's state in a discretisation (module docs), with its defaults."""
+
+    def __init__(self, scheme, disc):
+        self.scheme, self.d = scheme, disc
+
     def diagnostics(self) -> dict:
-        return {}
+        return self.scheme.diagnostics()
 
     def node_values(self, t: float | None = None) -> dict:
         """Per contact vertex, what the run records at time t (e.g. the contact pressure)."""
@@ -255,25 +292,6 @@ class Scheme:
 
     def stress_parts(self) -> list:
         raise NotImplementedError
-
-    def stress(self):
-        """sigma as an NGSolve coefficient function (the sum of :meth:`stress_parts`)."""
-        import ngsolve as ngs
-
-        sigma = None
-        for tensor, vector in self.stress_parts():
-            g = ngs.GridFunction(self.d.fes)
-            g.vec.FV().NumPy()[:] = vector
-            part = tensor(self.eps(g))
-            sigma = part if sigma is None else sigma + part
-        return sigma
-
-    def warnings(self) -> list:
-        """Messages (text) the run should warn about, issued by the loop after every preflight check passed."""
-        return []
-
-    def eps(self, field):
-        return kelvin_voigt.strain(field, self.d.dim)
 
 
 #: An event (a kink the step must land on) is the switching of this fraction of a group's weight (of the contact
@@ -326,100 +344,3 @@ def crossed_fraction(before, after) -> float:
             crossed = (b * a < 0) | ((a == 0) & (b != 0))
             out = max(out, float(np.sum(w[crossed]) / np.sum(w)))
     return out
-
-
-class KelvinVoigtScheme(Scheme):
-    """Model A's shared parts: the stress A eps(v) + G eps(u - lag v), the bonding-resolution check, the kinks."""
-
-    #: The elastic part of the reported stress is taken at u_n - lag * k v_n (explicit: u_{n-1}; implicit: u_n).
-    lag = 0.0
-
-    def stress_parts(self) -> list:
-        m, d = self.d.model, self.d
-        u, v = d.u.vec.FV().NumPy(), d.v.vec.FV().NumPy()
-        return [(m.viscous, v), (m.elastic, u - self.lag * self.k_last * v if self.lag else u)]
-
-    def bonding_check(self, k_max: float) -> dict:
-        """Record (and later warn) whether the step resolves the fastest debonding (k gamma_nu L^2 beta0 <= 0.1)."""
-        law = self.d.model.bonding
-        if law is None:
-            return {}
-        beta0 = self.d.model.beta0
-        self._resolved = law.resolved(k_max, beta0)
-        rate = law.fastest_rate(beta0)
-        if not self._resolved:  # (rate > 0 here)
-            self._resolution = (k_max * rate, 1.0 / rate, law.RESOLVED / rate)
-        return {"bonding_resolved": int(self._resolved)}
-
-    def warnings(self) -> list:
-        if getattr(self, "_resolved", True):
-            return []
-        ratio, scale, k_ok = self._resolution
-        return [f"k gamma_nu L^2 beta0 = {ratio:.3g}: debonding (time scale {scale:.3g} s) is faster than the step, "
-                f"so the bonding field is not resolved where |u_nu| ~ L (O(1) errors in beta possible); use k <= "
-                f"{k_ok:.2g} s for an accurate beta"]
-
-    def switching(self, u: np.ndarray, beta) -> list:
-        """The functions whose zeros are the kinks of the contact laws and of the bonding law, in groups of
-        (values, weights) for the event detection: at the contact quadrature points u_nu - gap (compliance),
-        u_nu (the pull), u_nu + L (saturation) and |u_tau| - L (the glue), weighted by the quadrature; at the
-        facet midpoints the debonding rate's argument and beta, weighted by the facet measure."""
-        from ..physics.ops import NP
-
-        d, m = self.d, self.d.model
-        if d.side is None:
-            return []
-        groups = []
-        u_nu = d.side.u_nu(u)
-        w = d.side.weights
-        for term in m.contact.terms:
-            if hasattr(term, "gap"):
-                groups.append(((u_nu - d.side.gap0 if term.gapped and d.side.gap0 is not None else u_nu) - term.gap,
-                               w))
-            if term.uses_beta and not term.tangential:
-                groups += [(u_nu, w), (u_nu + term.L, w)]
-            if term.tangential and d.side.T_tau:
-                groups.append((np.sqrt(np.sum(d.side.u_tau(u) ** 2, axis=-1)) - term.L, w))
-        if m.bonding is not None and beta is not None:
-            rs = d.rate_side
-            r = m.bonding.r(NP, rs.u_nu(u))
-            b = beta[rs.element]
-            groups += [(m.bonding.gamma_nu * b * r * r - m.bonding.eps_a, rs.weights), (b, rs.weights)]
-        return groups
-
-    def node_values(self, t: float | None = None) -> dict:
-        """The contact pressure at the contact vertices: the normal force the laws exert on each, int p_nu phi_i da
-        (by the quadrature of the boundary functional), over its share w_i of the side (the lumped pressure, as
-        Model B reports it); where a vertex is held (``pins_contact``) the whole force there, K_A v + K_G u - f
-        at its normal dof, over w_i."""
-        from ..physics.ops import NP
-
-        d, m = self.d, self.d.model
-        if d.dim == 1 or not m.contact or d.side is None:
-            return {}
-        u = d.u.vec.FV().NumPy()
-        g, side = d.geometry, d.side
-        beta = self._beta()
-        p = m.contact.normal(NP, side.u_nu(u), None if beta is None else beta[side.element], side.gap0)
-        pressure = np.zeros(len(d.node_dofs))
-        if p is not None:
-            pressure = d.nodal_pressure(p)
-        pinned = d.pinned_nodes
-        if pinned.size and t is not None:
-            f, internal = d.u.vec.CreateVector(), d.u.vec.CreateVector()
-            tmp, out = d.u.vec.CreateVector(), d.u.vec.CreateVector()
-            d.load_vector(t, f)
-            internal[:] = 0.0
-            for tensor, vector in self.stress_parts():
-                tmp.FV().NumPy()[:] = vector
-                out.data = (d.viscous.mat if tensor is m.viscous else d.elastic.mat) * tmp
-                internal.data += out
-            dofs = d.normal_dofs[pinned]
-            force = internal.FV().NumPy()[dofs] - f.FV().NumPy()[dofs]
-            pressure[pinned] = -g.normal_sign * force / d.node_weights[pinned]
-        return {"contact_pressure": pressure}
-
-    def event(self, start: dict):
-        before = self.switching(start["u"], start["beta"])
-        after = self.switching(self.d.u.vec.FV().NumPy(), self._beta())
-        return first_event(before, after), crossed_fraction(before, after)

@@ -25,7 +25,7 @@ import numpy as np
 from .. import stability
 from ..errors import StepLimitExceeded
 from ..physics.ops import NP
-from .base import KelvinVoigtScheme
+from .model_a import KelvinVoigtScheme
 
 
 class ExplicitEuler(KelvinVoigtScheme):
@@ -36,6 +36,11 @@ class ExplicitEuler(KelvinVoigtScheme):
     lag = 1.0  # sigma_n uses u_{n-1} = u_n - k v_n
     keep = 0  # no error control, one step: no history of accepted states (a copy of u a step saved)
     distributed_layout = {"cg_v_old": "dof", "step_limit_normal": "point", "step_limit_tangent": "point"}
+    state_variables = {
+        "cg_v_old": ("m/s", "restart state: the velocity of the step before (solver = 'cg': the first guess)"),
+        "step_limit_normal": ("Pa/m", "restart state: the largest normal spring met at each contact point"),
+        "step_limit_tangent": ("Pa/m", "restart state: the largest tangential spring met at each contact point"),
+    }
 
     def __init__(self, disc):
         super().__init__(disc)
@@ -52,6 +57,7 @@ class ExplicitEuler(KelvinVoigtScheme):
         delta = d.model.loads.delta  # the rod's end moves in time: the velocity is lifted on the clamp
         self.v_clamp, self.limit = None, None
         self._v_old = None  # (solver = 'cg': the velocity of the step before, for the first guess)
+        self._override = None  # the warning of a run above its predicted k_crit (allow_unstable)
         if delta is not None and delta.depends_on("t"):
             self.v_clamp = d.u.vec.CreateVector()
             self.v_clamp.FV().NumPy()[:] = 0.0  # CreateVector does not initialise
@@ -150,7 +156,7 @@ class ExplicitEuler(KelvinVoigtScheme):
                                stability_override=max(self.checks["stability_override"], int(override)))
 
     def warnings(self) -> list:
-        return ([self._override] if getattr(self, "_override", None) else []) + super().warnings()
+        return ([self._override] if self._override else []) + super().warnings()
 
     def step(self, t_prev: float, t_next: float) -> None:
         d, rhs = self.d, self.rhs

@@ -42,10 +42,11 @@ from collections import OrderedDict
 from .. import solvers
 from ..condensation import CondensedNewton, CondensedSystem, ContactOperator
 from ..physics.ops import NP
-from .base import KelvinVoigtScheme
+from .base import ErrorControlled
+from .model_a import KelvinVoigtScheme, kink_event
 
 
-class ImplicitEuler(KelvinVoigtScheme):
+class ImplicitEuler(ErrorControlled, KelvinVoigtScheme):
     """Backward Euler, contact and adhesion implicit (module docs).
 
     The step solves a0 K_A u_n + K_G u_n + j(beta_n, u_n, .) = F_n - K_A h_n, with
@@ -224,3 +225,7 @@ class ImplicitEuler(KelvinVoigtScheme):
 
     def diagnostics(self) -> dict:
         return {"newton_iterations": self.iterations, "coupling_passes": self.passes}
+
+    def event(self, start: dict):
+        """Where in the last step the contact and bonding laws' kinks were crossed (:func:`.model_a.kink_event`)."""
+        return kink_event(self.d, start, self._beta())

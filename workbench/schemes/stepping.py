@@ -408,93 +408,118 @@ class ChatterWatch:
         return self.world.any(self.counts.max(initial=0) >= self.max_switches)
 
 
-def march(disc, scheme, steps, recorder, *, progress=None, limit=None, limit_origin="the given limit", resume=False,
+def march(disc, scheme, steps, observe, *, progress=None, limit=None, limit_origin="the given limit", resume=False,
           after_step=None):
-    """Advance ``scheme`` with the step controller ``steps``, recording what ``recorder`` wants at each time.
+    """Advance ``scheme`` with the step controller ``steps``, handing each accepted state's time to ``observe``.
 
-    With an adaptive controller every step is judged (scaled local error, kinks inside
-    it) and a rejected step is redone from the exact state before it
-    (:meth:`~workbench.schemes.base.Scheme.state` / ``restore``). Stops with
-    :class:`~workbench.errors.Diverged` at the first accepted step whose displacement is
-    not finite or exceeds ``limit`` anywhere (the state is then meaningless for a
-    small-strain model), whose velocity has alternated in sign for 12 steps without
-    decaying (:class:`OscillationWatch`), or (schemes that ask for it: the explicit one)
-    whose contact nodes chatter (:class:`ChatterWatch`); the recorder keeps what was
-    computed before. ``limit_origin`` says in the message where the limit came from.
+    ``observe(t, final=False, control=None)`` is the output callback (the runner's recorder:
+    :meth:`workbench.results.Recorder.record`; ``control``: an adaptive run's step size and error estimate). With an
+    adaptive controller every step is judged (scaled local error, kinks inside it) and a rejected step is redone
+    from the exact state before it (:meth:`~workbench.schemes.base.Scheme.state` / ``restore``). Stops with
+    :class:`~workbench.errors.Diverged` at the first accepted step that :class:`_Guard` finds diverged; what was
+    observed before is kept. ``limit_origin`` says in the message where the limit came from.
 
-    With ``resume`` the scheme, controller and recorder hold a restored state (a restart,
-    :mod:`workbench.restart`): the loop goes on from it, without ``start`` and the first
-    record. ``after_step(t, n)`` is called after each accepted step is recorded, ``n``
-    counting the steps from the run's start (the runner writes its checkpoints there).
+    With ``resume`` the scheme, controller and observer hold a restored state (a restart, :mod:`workbench.restart`):
+    the loop goes on from it, without ``start`` and the first record. ``after_step(t, n)`` is called after each
+    accepted step is observed, ``n`` counting the steps from the run's start (the runner writes its checkpoints
+    there).
     """
-    from ..errors import NewtonFailed
-
-    u_np = disc.u.vec.FV().NumPy()
-    bound = limit or math.inf
     if resume:
         t = steps.t
     else:
         t = steps.t0
         scheme.start(t)
         scheme.accept(t)
-        recorder.record(t, scheme, control=_control(steps, None, None))
+        observe(t, control=_control(steps, None, None))
     # a restarted run watches afresh: the watchers only stop a run (they never change its state), so the restart
     # delays the detection of an instability that began before it by at most their windows (12 and 20 steps)
-    world = disc.world
-    owned = disc.owned()
-    watch = OscillationWatch(disc.v.vec.FV().NumPy(), [None] + ([disc.normal_dofs] if disc.dim > 1 else []),
-                             world=world, owned=owned)
-    chatter = ChatterWatch(lambda: disc.normal_displacement(u_np), world=world) if scheme.chatter_watch else None
+    guard = _Guard(disc, scheme, limit, limit_origin)
     n = steps.taken
-    bar = _progress_bar(progress if world.root else False, total=steps.n_steps, initial=n, unit="step",
+    bar = _progress_bar(progress if disc.world.root else False, total=steps.n_steps, initial=n, unit="step",
                         mininterval=0.5, leave=False, desc=disc.scene.name)
     try:
         while not steps.done():
             t_prev, t = steps.next()
-            if steps.adaptive:
-                before = scheme.state()
-                try:
-                    scheme.step(t_prev, t)
-                except NewtonFailed:
-                    scheme.restore(before)
-                    steps.rejected(failed=True)
-                    continue
-                err = scheme.local_error(steps.rtol, steps.atol)
-                theta, crossed = scheme.event(before)
-                judged = steps.per_unit_step(err, crossed)
-                if not steps.judge(err, theta, crossed):
-                    scheme.restore(before)
-                    continue
-                err = judged
-            else:
-                scheme.step(t_prev, t)
-                err = None
-                steps.accepted()
+            err = _advance(scheme, steps, t_prev, t)
+            if err is _REJECTED:
+                continue
             scheme.accept(t)
             n += 1
-            norm = world.max(np.abs(u_np).max(initial=0.0))
-            oscillating = watch.flipped()
-            chattering = chatter is not None and chatter.chattering()
-            if not math.isfinite(norm) or norm > bound or oscillating or chattering:
-                if not math.isfinite(norm):
-                    what = "non-finite values"
-                elif oscillating:
-                    what = (f"a sign-alternating oscillation of the velocity, not decaying over {watch.window} steps "
-                            "(the scheme is unstable at this step size)")
-                elif chattering:
-                    what = (f"contact chatter: a contact node switched between penetration and separation "
-                            f"{chatter.max_switches} or more times within {chatter.window} steps (the explicit "
-                            "scheme is unstable at this step size, or the step is far too long for the load)")
-                else:
-                    what = f"a displacement of {norm:.3g} m, beyond the bound {limit:.3g} m ({limit_origin})"
-                raise Diverged(f"{disc.scene.name}: {what} at step {n} (t = {t:.6g} s) "
-                               f"with the {scheme.name} scheme, k = {t - t_prev:.3g} s", step=n, time=t)
-            recorder.record(t, scheme, final=steps.done(), control=_control(steps, t - t_prev, err))
+            guard.check(n, t_prev, t)
+            observe(t, final=steps.done(), control=_control(steps, t - t_prev, err))
             if after_step is not None:
                 after_step(t, n)
             bar.update()
     finally:
         bar.close()
+
+
+#: What :func:`_advance` returns for a step the controller rejected.
+_REJECTED = object()
+
+
+def _advance(scheme, steps, t_prev: float, t: float):
+    """Take the step; with an adaptive controller judge it (redone from the state before it when rejected). The
+    scaled error per unit of elapsed time (None: not estimated), or :data:`_REJECTED`."""
+    if not steps.adaptive:
+        scheme.step(t_prev, t)
+        steps.accepted()
+        return None
+    from ..errors import NewtonFailed
+
+    before = scheme.state()
+    try:
+        scheme.step(t_prev, t)
+    except NewtonFailed:
+        scheme.restore(before)
+        steps.rejected(failed=True)
+        return _REJECTED
+    err = scheme.local_error(steps.rtol, steps.atol)
+    theta, crossed = scheme.event(before)
+    judged = steps.per_unit_step(err, crossed)
+    if not steps.judge(err, theta, crossed):
+        scheme.restore(before)
+        return _REJECTED
+    return judged
+
+
+class _Guard:
+    """What stops a run as diverged after an accepted step: a displacement (max over dofs) that is not finite or
+    exceeds ``limit`` anywhere (the state is then meaningless for a small-strain model), a velocity that has
+    alternated in sign for 12 steps without decaying (:class:`OscillationWatch`), or (schemes that ask for it: the
+    explicit one) contact nodes that chatter (:class:`ChatterWatch`). Every decision is reduced over the processes
+    that hold the body (``disc.world``)."""
+
+    def __init__(self, disc, scheme, limit, limit_origin):
+        self.disc, self.scheme, self.origin = disc, scheme, limit_origin
+        self.limit = limit
+        self.bound = limit or math.inf
+        self.u = u = disc.u.vec.FV().NumPy()
+        self.world = disc.world
+        self.watch = OscillationWatch(disc.v.vec.FV().NumPy(), [None] + ([disc.normal_dofs] if disc.dim > 1 else []),
+                                      world=self.world, owned=disc.owned())
+        self.chatter = ChatterWatch(lambda: disc.normal_displacement(u), world=self.world) \
+            if scheme.chatter_watch else None
+
+    def check(self, n: int, t_prev: float, t: float) -> None:
+        norm = self.world.max(np.abs(self.u).max(initial=0.0))
+        oscillating = self.watch.flipped()
+        chattering = self.chatter is not None and self.chatter.chattering()
+        if math.isfinite(norm) and norm <= self.bound and not oscillating and not chattering:
+            return
+        if not math.isfinite(norm):
+            what = "non-finite values"
+        elif oscillating:
+            what = (f"a sign-alternating oscillation of the velocity, not decaying over {self.watch.window} steps "
+                    "(the scheme is unstable at this step size)")
+        elif chattering:
+            what = (f"contact chatter: a contact node switched between penetration and separation "
+                    f"{self.chatter.max_switches} or more times within {self.chatter.window} steps (the explicit "
+                    "scheme is unstable at this step size, or the step is far too long for the load)")
+        else:
+            what = f"a displacement of {norm:.3g} m, beyond the bound {self.limit:.3g} m ({self.origin})"
+        raise Diverged(f"{self.disc.scene.name}: {what} at step {n} (t = {t:.6g} s) "
+                       f"with the {self.scheme.name} scheme, k = {t - t_prev:.3g} s", step=n, time=t)
 
 
 class _NoBar:

@@ -42,6 +42,9 @@ class AdhesivePull(ContactTerm):
         inside = ops.ifpos(-u_nu, ops.ifpos(u_nu + self.L, 1.0, 0.0), 0.0)
         return self.sign * self.gamma_nu * beta * beta * inside
 
+    def kinks(self, u_nu, u_tau):
+        return [u_nu, u_nu + self.L]  # the pull starts at contact and saturates at the bond length
+
     def max_slope(self, beta0):
         return self.gamma_nu * beta0 ** 2, 0.0
 

@@ -36,6 +36,9 @@ class NormalCompliance(ContactTerm):
             return self.c_nu * ops.ifpos(s, 1.0, 0.0)
         return self.c_nu * self.m_nu * ops.pow_pos(s, self.m_nu - 1.0)
 
+    def kinks(self, u_nu, u_tau):
+        return [u_nu - self.gap]  # where the foundation starts to push
+
     def max_slope(self, beta0):
         # unbounded for m_nu > 1; the slope at a penetration of L (the bond length) stands for it
         return self.c_nu * self.m_nu * (self.L ** (self.m_nu - 1.0) if self.m_nu != 1 else 1.0), 0.0

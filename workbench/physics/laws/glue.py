@@ -45,5 +45,10 @@ class TangentialGlue(ContactTerm):
                          eye)
         return (self.c_tau * beta)[..., None, None] * slope
 
+    def kinks(self, u_nu, u_tau):
+        if u_tau is None:  # (the rod has no tangential components)
+            return []
+        return [np.sqrt(np.sum(u_tau * u_tau, axis=-1)) - self.L]  # where the glue saturates
+
     def max_slope(self, beta0):
         return 0.0, self.c_tau * beta0

@@ -49,5 +49,8 @@ class PowerLawPull(ContactTerm):
         inside = ops.ifpos(-u_nu, ops.ifpos(u_nu + self.L, 1.0, 0.0), 0.0)
         return self.gamma_p * beta * beta * self.q_p * ops.pow_pos(s, self.q_p - 1.0) * inside
 
+    def kinks(self, u_nu, u_tau):
+        return [u_nu, u_nu + self.L]  # the pull starts at contact and saturates at the bond length
+
     def max_slope(self, beta0):
         return self.q_p * self.gamma_p * beta0 ** 2, 0.0

@@ -1,0 +1,164 @@
+"""Model B's contact points and the primal-dual active set that solves the condensed inequality on them.
+
+The unilateral constraint and the compliant layer's law act at the contact points with unknowns: the contact
+vertices (P1) or, on P2 in 2D, the vertices and the facet midpoints (the nodes of P2), lumped by the weights
+w_i = int phi_i da (Simpson's on P2). With s = u_nu at the points (s = B u; P1: the normal dofs) and the condensed
+stiffness S0^-1 = (B K^-1 B^T)^-1, a step solves, for the points' forces lam, the nodal law of the layer
+(:mod:`workbench.physics.unilateral`) in the states separated / stuck / compliant / rigid.
+
+:meth:`ContactNodes.solve` is a primal-dual active set on the states, from the previous step's: exact once the
+states are right, one small dense solve an iteration; it may cycle when the condensed stiffness is not an
+M-matrix, and then the states are re-seeded by projected Gauss-Seidel on the (convex) condensed energy, which
+converges from anywhere.
+
+Examples
+--------
+>>> import workbench
+>>> from workbench import discretisation
+>>> nodes = ContactNodes(discretisation.build(workbench.scene("memory_slab", h=0.25)))
+>>> nodes.size, round(float(nodes.w.sum()), 12)  # the free contact vertices and their share of the side
+(8, 1.875)
+"""
+from __future__ import annotations
+
+import numpy as np
+import scipy.sparse as sp
+
+from ..errors import NewtonFailed
+from ..physics import unilateral
+
+
+class ContactNodes:
+    """The contact points of Model B on one discretisation, their weights and initial gaps, and the active set."""
+
+    max_iterations = 50
+
+    def __init__(self, d):
+        self.d, self.layer = d, d.model.layer
+        free = np.array(d.fes.FreeDofs(), dtype=bool)
+        normal = d.normal_dofs
+        self.active_nodes = np.nonzero(free[normal])[0]  # a clamped contact vertex is not an unknown
+        self.C = normal[self.active_nodes]
+        self.sign = d.geometry.normal_sign  # u_nu = sign * u_C
+        self.w = d.contact_weights[self.active_nodes]
+        # a curved contact side: the layer's law acts on u_nu - g0 (the initial gap at the node; None: flat)
+        self.g0 = d.geometry.gap0(d.node_xyz[self.active_nodes])
+        self.vertex_weights = d.contact_weights  # each contact vertex's share of the side (P2: Simpson's)
+        self.B = None  # P2: s = B u at the contact points (the vertices, then the facet midpoints)
+        self.midpoints = None
+        self.n_vertex_points = self.active_nodes.size
+        if d.numerics.order == 2:
+            self._quadratic_points()
+        self.states = np.full(self.w.size, unilateral.SEPARATED)
+        self.lam = np.zeros(self.w.size)
+
+    @property
+    def size(self) -> int:
+        return self.w.size
+
+    def _quadratic_points(self) -> None:
+        """P2 (2D): the constraint and the layer's law at the contact vertices and the facet midpoints (the nodes of
+        P2), lumped by Simpson's rule (a vertex: 1/6 of each adjacent facet, a midpoint: 2/3 of its facet).
+        s = B u, B the normal trace at those points (NGSolve's P2 edge functions are hierarchical, so a midpoint's
+        u_nu involves its edge dof as well as the two vertices)."""
+        from ..boundary import ContactSide
+
+        d = self.d
+        mid = ContactSide(d.fes, d.contact_name, d.geometry, rule=0)  # one point per facet: its midpoint
+        facet_len = mid.weights  # (one point per facet, in point order)
+        length = np.zeros(len(facet_len))
+        length[mid.element] = facet_len  # in facet order
+        index = {int(v): i for i, v in enumerate(d.vertex_numbers)}
+        w_v = np.zeros(len(d.node_dofs))
+        for j, el in enumerate(d.mesh.Boundaries(d.contact_name).Elements()):
+            for v in el.vertices:
+                w_v[index[v.nr]] += length[j] / 6.0
+        m = self.active_nodes.size
+        rows_v = sp.csr_matrix((np.full(m, self.sign), (np.arange(m), self.C)), shape=(m, d.ndof))
+        self.B = sp.vstack([rows_v, mid.T_nu]).tocsr()
+        self.w = np.concatenate([w_v[self.active_nodes], 2.0 * facet_len / 3.0])
+        self.vertex_weights = w_v
+        corners = [[d.mesh[v].point for v in el.vertices] for el in d.mesh.Boundaries(d.contact_name).Elements()]
+        self.midpoints = np.asarray([np.mean(c, axis=0) for c in corners])[mid.element]  # (in point order)
+        if self.g0 is not None:
+            self.g0 = np.concatenate([self.g0, mid.gap0])
+        self.C = np.unique(self.B.indices)  # the dofs the contact points see (for the recovery only)
+
+    def s(self, u: np.ndarray) -> np.ndarray:
+        """u_nu at the contact points."""
+        return self.sign * u[self.C] if self.B is None else self.B @ u
+
+    def distance(self, u: np.ndarray) -> np.ndarray:
+        """s - g0: the points' normal displacement less their initial gap (what the layer's law acts on)."""
+        s = self.s(u)
+        return s - self.g0 if self.g0 is not None else s
+
+    def force(self, lam: np.ndarray, ndof: int) -> np.ndarray:
+        """The dof vector of the points' forces on the body, in the dofs' directions."""
+        if self.B is not None:
+            return self.B.T @ lam
+        force = np.zeros(ndof)
+        force[self.C] = self.sign * lam  # contact forces on the body, in dof direction: -(outward) ...
+        return force
+
+    def solve(self, S_inv, rho, s_free: np.ndarray, time: float):
+        """(s, lam, iterations) of the condensed inequality for the contact-free displacement ``s_free`` at the points
+        (its distance, g0 taken off), by the primal-dual active set from the previous step's states (module docs)."""
+        layer = self.layer
+        rho_t = rho * self.w  # rho in traction units: z = s + rho_t * lam / w
+        states = self.states.copy()
+        total = 0
+        for attempt in range(2):
+            seen = set()
+            for _ in range(self.max_iterations):
+                total += 1
+                s, lam = layer.solve_states(S_inv, s_free, self.w, states)
+                new = layer.state_of(s + rho_t * lam / self.w, rho_t)
+                if np.array_equal(new, states):
+                    self.states, self.lam = states, lam
+                    return s, lam, total
+                key = new.tobytes()
+                if key in seen:
+                    break
+                seen.add(key)
+                states = new
+            if attempt == 0:
+                states = self._gauss_seidel_states(S_inv, rho, s_free)
+        raise NewtonFailed(f"{self.d.scene.name}: the contact active-set iteration did not settle ({total} iterations) "
+                           f"at t = {time:.6g} s; try a smaller k", time=time)
+
+    def _gauss_seidel_states(self, S, rho_diag, s_free, sweeps=2000, tol=1e-13):
+        """States of the condensed energy's minimiser by projected Gauss-Seidel (exact coordinate minimisation)."""
+        w = self.w
+        b = S @ s_free
+        diag = np.diag(S)
+        rho = w / diag  # coordinate i: minimise (S_ii / 2) s^2 - y S_ii s + w psi(s) over s <= g -> prox
+        layer = self.layer
+        s = np.minimum(self.distance(self.d.u.vec.FV().NumPy()), layer.g)
+        for _ in range(sweeps):
+            change = 0.0
+            for i in range(len(s)):
+                y = (b[i] - S[i] @ s + diag[i] * s[i]) / diag[i]
+                new = float(layer.prox(y, rho[i]))
+                change = max(change, abs(new - s[i]))
+                s[i] = new
+            if change <= tol * (1.0 + np.abs(s).max()):
+                break
+        lam = S @ (s_free - s)
+        return layer.state_of(s + rho_diag * lam, rho_diag * w)
+
+    def kinks(self, u: np.ndarray, lam: np.ndarray) -> list:
+        """Zeros where a contact point changes state, weighted by its share of the side: s = u_nu (separation),
+        s - g (the rigid limit) and lam / w - F (the layer's yield limit, between stuck and compliant)."""
+        s = self.distance(u)
+        return [(s, self.w), (s - self.layer.g, self.w), (lam / self.w - self.layer.F, self.w)]
+
+    def complementarity(self, u: np.ndarray, rho) -> float:
+        """max |s - prox(s + rho lam / w)| at the points: 0 at a solution of the inequality."""
+        return self.layer.complementarity(self.distance(u), self.lam, self.w, rho * self.w) if self.size else 0.0
+
+    def state(self) -> dict:
+        return {"states": self.states.copy(), "lam": self.lam.copy()}
+
+    def restore(self, extra: dict) -> None:
+        self.states, self.lam = extra["states"].copy(), extra["lam"].copy()
