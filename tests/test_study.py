@@ -237,7 +237,9 @@ def _alive(pid):
 
 @pytest.mark.parametrize("sig", [signal.SIGTERM, signal.SIGKILL])
 def test_workers_exit_when_the_study_is_killed(tmp_path, sig):
-    """Killing the `workbench study` process (plain kill or kill -9) leaves no worker running."""
+    """Killing the `workbench study` process (plain kill or kill -9) leaves no worker running: the workers exit with it
+    (the kernel's parent-death signal, set before their imports), waited for with a hang guard only (a loaded
+    machine gave a 10 s margin too little)."""
     cmd = [sys.executable, "-m", "workbench.cli", "study", "tp2", "--k", "0.0001", "0.00005", "--reference", "ode",
            "--workers", "2", "--no-progress", "-o", str(tmp_path / "k.nc")]
     proc = subprocess.Popen(cmd, stdout=subprocess.DEVNULL, stderr=subprocess.DEVNULL)
@@ -249,7 +251,7 @@ def test_workers_exit_when_the_study_is_killed(tmp_path, sig):
     assert len(workers) == 2
     os.kill(proc.pid, sig)
     proc.wait()
-    deadline = time.time() + 10
+    deadline = time.time() + 300
     while time.time() < deadline and any(_alive(w) for w in workers):
         time.sleep(0.1)
     assert not any(_alive(w) for w in workers)

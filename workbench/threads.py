@@ -1,4 +1,5 @@
-"""Thread pools: one BLAS thread while workbench computes, NGSolve's TaskManager only when asked.
+"""Thread pools and processes of workbench's own: one BLAS thread while workbench computes, NGSolve's TaskManager
+only when asked, a worker that dies with its parent.
 
 NGSolve's wheel, NumPy and SciPy each load their own OpenBLAS, each with a pool of
 threads; next to NGSolve's own task manager they oversubscribe a small machine
@@ -38,6 +39,33 @@ POOLS_STARTED_SINGLE = False
 def single_threaded(environment: dict) -> dict:
     """A copy of ``environment`` in which every BLAS pool starts with one thread (a worker process's)."""
     return dict(environment) | {name: "1" for name in BLAS_VARIABLES}
+
+
+def die_with_parent(parent: int) -> None:
+    """A worker process of workbench's own exits when its parent (pid ``parent``) dies: Linux's PR_SET_PDEATHSIG (the
+    kernel kills it with the parent), and a watchdog thread on the parent's pid elsewhere. Called first thing, before
+    the heavy imports (NumPy, NGSolve, xarray: seconds on a loaded machine, during which a killed parent's worker
+    would otherwise live on)."""
+    import threading
+    import time
+
+    try:  # Linux: the kernel sends SIGKILL when the parent thread exits
+        import ctypes
+        import signal
+
+        ctypes.CDLL(None, use_errno=True).prctl(1, signal.SIGKILL)  # PR_SET_PDEATHSIG = 1
+    except (OSError, AttributeError):
+        pass
+    if os.getppid() != parent:  # the parent died before prctl took effect
+        os._exit(1)
+
+    def watch():
+        while True:
+            time.sleep(1.0)
+            if os.getppid() != parent:
+                os._exit(1)
+
+    threading.Thread(target=watch, daemon=True).start()
 
 
 def lean_process() -> None:

@@ -25,7 +25,8 @@ import warnings
 _HEADER = struct.Struct(">Q")
 #: A worker's whole program (:mod:`workbench.study.worker`; ``python -m workbench.study.worker`` would import
 #: ``workbench.study``, so xarray, first).
-START = "from workbench import threads; threads.lean_process(); from workbench.study.worker import main; main()"
+START = ("import sys; from workbench import threads; threads.die_with_parent(int(sys.argv[1])); threads.lean_process(); "
+         "from workbench.study.worker import main; main()")
 
 
 def run_case(scene, case_values, record_times, snapshots, extra_attrs, extend=None):

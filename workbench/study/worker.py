@@ -5,41 +5,18 @@ that runs scenes only, which starts its BLAS pools with one thread and skips das
 Reads tasks (pickled argument tuples of :func:`workbench.study.execute.run_case`)
 from standard input, answers each with ``("ok", Dataset)`` or ``("error",
 traceback)`` on its own copy of standard output, and exits at end of input or
-when its parent dies. Whatever the run prints goes to standard error, so it
+when its parent dies (:func:`workbench.threads.die_with_parent`, the program's first
+call, before anything heavy is imported). Whatever the run prints goes to standard error, so it
 cannot corrupt the channel.
 """
 from __future__ import annotations
 
 import os
 import sys
-import threading
-import time
 import traceback
 
 
-def _die_with_parent(parent: int) -> None:
-    try:  # Linux: the kernel sends SIGKILL when the parent thread exits
-        import ctypes
-        import signal
-
-        ctypes.CDLL(None, use_errno=True).prctl(1, signal.SIGKILL)  # PR_SET_PDEATHSIG = 1
-    except (OSError, AttributeError):
-        pass
-    if os.getppid() != parent:  # the parent died before prctl took effect
-        os._exit(1)
-
-    def watch():
-        while True:
-            time.sleep(1.0)
-            if os.getppid() != parent:
-                os._exit(1)
-
-    threading.Thread(target=watch, daemon=True).start()
-
-
 def main() -> None:
-    parent = int(sys.argv[1]) if len(sys.argv) > 1 else os.getppid()
-    _die_with_parent(parent)
     channel = os.fdopen(os.dup(1), "wb")
     os.dup2(2, 1)  # prints inside a run go to stderr, never into the channel
     stdin = sys.stdin.buffer
