@@ -177,7 +177,7 @@ def measure(root: Path = ROOT) -> dict:
                 classes.append((node.end_lineno - node.lineno + 1, f"{name}.{node.name}"))
             if isinstance(node, (ast.FunctionDef, ast.AsyncFunctionDef)):
                 functions.append((node.end_lineno - node.lineno + 1, f"{name}.{node.name}"))
-            if isinstance(node, (ast.Tuple, ast.List, ast.Set)) and name != f"{PACKAGE}.numerics" \
+            if isinstance(node, (ast.Tuple, ast.List, ast.Set)) and not name.endswith(".numerics") \
                     and getattr(node, "_defined", False):
                 strings = [e.value for e in node.elts if isinstance(e, ast.Constant) and isinstance(e.value, str)]
                 if len(strings) >= 2 and len(strings) == len(node.elts) and set(strings) <= NUMERICAL_NAMES \

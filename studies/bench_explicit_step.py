@@ -20,9 +20,10 @@ import time
 import numpy as np
 
 import workbench
-from workbench import discretisation, schemes
-from workbench.threads import blas_single_threaded
-from workbench.threads import task_manager as _threads
+from workbench.discrete import discretisation
+from workbench import schemes
+from workbench.running.threads import blas_single_threaded
+from workbench.running.threads import task_manager as _threads
 
 
 def scene(nx, solver):

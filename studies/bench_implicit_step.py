@@ -20,8 +20,9 @@ import time
 import numpy as np
 
 import workbench
-from workbench import discretisation, schemes
-from workbench.threads import blas_single_threaded
+from workbench.discrete import discretisation
+from workbench import schemes
+from workbench.running.threads import blas_single_threaded
 
 STIFF = dict(c_nu=100.0, gamma_nu=20.0, L=0.3)
 

@@ -17,7 +17,8 @@ import time
 import numpy as np
 
 import workbench
-from workbench import discretisation, schemes
+from workbench.discrete import discretisation
+from workbench import schemes
 
 
 def per_step_times(memory, h, steps, k):

@@ -32,7 +32,7 @@ from pathlib import Path
 
 import numpy as np
 
-from workbench.world import alone
+from workbench.discrete.world import alone
 
 ROOT = Path(__file__).resolve().parent.parent
 

@@ -56,7 +56,7 @@ k / 2 over the same T. A cell is
 * ``diverged`` -- the run is stopped by ``workbench.Diverged`` (non-finite,
   displacement > 10 x body, or a non-decaying sign-alternating oscillation).
 
-The predicted boundary ``workbench.stability.critical_step(scene).k_crit`` is
+The predicted boundary ``workbench.discrete.stability.critical_step(scene).k_crit`` is
 drawn over the map for each c_nu.
 """
 from __future__ import annotations
@@ -76,7 +76,8 @@ import numpy as np
 import xarray as xr
 
 import workbench
-from workbench import references, stability
+from workbench import references
+from workbench.discrete import stability
 from workbench.study import Study
 from workbench.study.measures import beta_far, normal_displacement, run_records, summary, tip
 
@@ -600,7 +601,7 @@ def to_dataset(cases, cells, curve, bounds, summary, quick):
         "map_message": ("cell", np.array([r["message"] for r in cells], dtype=object), "", "Diverged message"),
         "map_wall_time": ("cell", [r["wall_time"] for r in cells], "s", "wall time (explicit + reference)"),
         "curve_c_nu": ("curve", curve[0], "Pa/m", "c_nu of the predicted curve"),
-        "curve_k_crit": ("curve", curve[1], "s", "predicted k_crit (workbench.stability.critical_step)"),
+        "curve_k_crit": ("curve", curve[1], "s", "predicted k_crit (workbench.discrete.stability.critical_step)"),
     }
     for name, (dim, vals, units, long_name) in m.items():
         ds[name] = xr.Variable(dim, np.asarray(vals), attrs={"units": units, "long_name": long_name})

@@ -69,7 +69,7 @@ SKIP_ATTRS = {"history", "wall_time", "cpu_time", "setup_time", "memory_peak_mb"
 
 
 def _scene_names():
-    import workbench.scenes as scenes
+    import workbench.input.scenes as scenes
 
     return set(scenes.PRESETS)
 

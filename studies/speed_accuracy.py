@@ -25,7 +25,7 @@ from pathlib import Path
 
 import workbench
 from workbench import plotting
-from workbench.results import far_facet
+from workbench.output.results import far_facet
 from workbench.study import Study, cheapest
 
 STIFF = dict(c_nu=100.0, gamma_nu=20.0, L=0.3)

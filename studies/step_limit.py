@@ -34,7 +34,7 @@ from pathlib import Path
 import numpy as np
 
 import workbench
-from workbench import stability
+from workbench.discrete import stability
 from workbench.study.measures import normal_displacement as u_nu
 
 ROOT = Path(__file__).resolve().parents[1]

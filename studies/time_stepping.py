@@ -104,8 +104,8 @@ def cost_to(rows, method, target):
 def memory(steps):
     """Per-step wall times of the general kernel by quadrature and by exponential sums on memory_slab."""
     import workbench
-    from workbench import discretisation
-    from workbench.threads import blas_single_threaded
+    from workbench.discrete import discretisation
+    from workbench.running.threads import blas_single_threaded
     from workbench.schemes import scheme_class
 
     k, out, finals = 1e-4, {}, {}
@@ -166,7 +166,7 @@ def main(argv=None):
     args = ap.parse_args(argv)
     import xarray as xr
 
-    from workbench.files import atomic_write
+    from workbench.output.files import atomic_write
 
     out = Path(args.out)
     out.mkdir(parents=True, exist_ok=True)

@@ -1,6 +1,6 @@
 """The implicit schemes' contact linearisation, and normal compliance with exponents m_nu != 1.
 
-The condensed semismooth Newton (workbench.condensation) needs f(u_C) = j(beta, u, .)|_C and its
+The condensed semismooth Newton (workbench.discrete.condensation) needs f(u_C) = j(beta, u, .)|_C and its
 Jacobian df/du_C, which NGSolve derives from the IfPos integrand (AssembleLinearization). The
 Jacobian is checked here against central finite differences of f itself (as NGSolve's own
 tests/pytest/test_contact.py checks AssembleLinearization against Apply), at random states whose
@@ -14,8 +14,9 @@ import numpy as np
 import pytest
 
 import workbench
-from workbench import discretisation, references
-from workbench.condensation import ContactOperator
+from workbench.discrete import discretisation
+from workbench import references
+from workbench.discrete.condensation import ContactOperator
 
 
 def random_state(op, d, rng, scale):
@@ -97,8 +98,8 @@ def test_implicit_slab_with_power_compliance_matches_explicit(m):
 def test_condensed_system_is_the_dense_schur_complement():
     """S0^{-1} = ((M^{-1})_CC)^{-1} built with the factored M equals the inverse of the dense (M^{-1})_CC, and the
     condensed Newton solves the full system M u + j(u) = r (checked on the assembled dense matrices)."""
-    from workbench import solvers
-    from workbench.condensation import CondensedNewton, CondensedSystem
+    from workbench.discrete import solvers
+    from workbench.discrete.condensation import CondensedNewton, CondensedSystem
 
     sc = workbench.scene("slab", h=0.1, ny=2, c_nu=50.0, gamma_nu=2.0, c_tau=3.0)
     d = discretisation.build(sc)

@@ -14,7 +14,7 @@ import numpy as np
 import pytest
 
 import workbench
-from workbench import discretisation
+from workbench.discrete import discretisation
 
 U_NU = [0.2, 0.1, 0.0, -0.1, -0.3, -0.45, -0.6, -0.3, 0.0, 0.05, 0.0]  # at x = 0, 0.1, ..., 1
 U_TAU = [0.0, 0.1, 0.3, 0.4, 0.5, 0.3, 0.1, -0.3, -0.5, -0.3, 0.0]

@@ -15,7 +15,7 @@ from pathlib import Path
 
 import pytest
 
-from workbench.world import alone
+from workbench.discrete.world import alone
 
 ROOT = Path(__file__).resolve().parents[1]
 PAGES = [ROOT / "README.md"] + sorted((ROOT / "docs").glob("*.md"))

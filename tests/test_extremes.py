@@ -15,8 +15,9 @@ import numpy as np
 import pytest
 
 import workbench
-from workbench import references, stability
-from workbench.stability import StepTooLarge
+from workbench import references
+from workbench.discrete import stability
+from workbench.discrete.stability import StepTooLarge
 from workbench.study.measures import beta_far, penetration, tip
 
 SLAB = dict(h=0.05)

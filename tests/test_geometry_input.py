@@ -11,7 +11,7 @@ import numpy as np
 import pytest
 
 import workbench
-from workbench import meshes
+from workbench.input import meshes
 from workbench.errors import ParameterError
 
 SLAB_ROLES = {"bottom": "contact", "left": "clamped", "top": "traction", "right": "free"}
@@ -199,7 +199,8 @@ def test_a_3d_gmsh_file_gives_the_built_in_block(tmp_path):
 def test_the_memory_preflight_counts_a_mesh_bodys_own_vertices(slab_msh):
     """The estimate before a run (which refuses a run that cannot fit) takes the mesh's vertices, not its element
     count as if it were a box's cells: P1 dofs exactly, for a file and for a Hertz body."""
-    from workbench import discretisation, preflight
+    from workbench.discrete import discretisation
+    from workbench.running import preflight
 
     for sc in (workbench.scene(mesh=str(slab_msh), boundaries=SLAB_ROLES),
                workbench.scene("memory_hertz3d", h_contact=0.04)):

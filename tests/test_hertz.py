@@ -11,8 +11,8 @@ import numpy as np
 import pytest
 
 import workbench
-from workbench import discretisation
-from workbench.condensation import ContactOperator
+from workbench.discrete import discretisation
+from workbench.discrete.condensation import ContactOperator
 from workbench.physics.ops import NP
 from workbench.references import hertz
 
@@ -187,7 +187,7 @@ def test_both_model_a_schemes_on_a_curved_body():
     and one above the limit at the start is refused before work."""
     from pathlib import Path
 
-    from workbench import stability
+    from workbench.discrete import stability
     from workbench.errors import StepLimitExceeded, StepTooLarge
 
     toml = Path(__file__).resolve().parents[1] / "docs" / "examples" / "rocker.toml"

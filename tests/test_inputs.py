@@ -155,8 +155,8 @@ def test_divergence_message_states_the_limit_used():
             workbench.run("tp1", k=0.05, limit=bad, progress=False)
 
 
-@pytest.mark.parametrize("module", ["workbench", "workbench.geometry", "workbench.physics.kelvin_voigt",
-                                    "workbench.physics.laws", "workbench.scenes", "workbench.models", "workbench.cli"])
+@pytest.mark.parametrize("module", ["workbench", "workbench.input.geometry", "workbench.physics.kelvin_voigt",
+                                    "workbench.physics.laws", "workbench.input.scenes", "workbench.input.models", "workbench.cli"])
 def test_checking_a_scene_does_not_import_ngsolve(module):
     """``import workbench`` is lazy so that ``workbench scenes`` / ``show`` and a scene's checks start at once; the
     geometry and the material tensors imported NGSolve at module level (so did every scene). NGSolve is imported

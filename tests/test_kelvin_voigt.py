@@ -10,7 +10,7 @@ import pytest
 import scipy.sparse as sp
 
 import workbench
-from workbench import discretisation
+from workbench.discrete import discretisation
 from workbench.references import modal_linear
 
 

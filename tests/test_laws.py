@@ -10,7 +10,7 @@ the integrand of j) and as NumPy arrays at the contact quadrature points (the ti
 * the sum of the laws (workbench.physics.contact.Contact): its largest normal slope is the largest central finite
   difference of the summed traction, terms on the same side of u_nu = 0 adding (the two pulls at u_nu -> -L).
 
-And the contact side (workbench.boundary): T^T (w p(T u)) equals NGSolve's assembled boundary linear form of the
+And the contact side (workbench.discrete.boundary): T^T (w p(T u)) equals NGSolve's assembled boundary linear form of the
 same law (to round-off), for P1 and P2 in 2D and 3D, so the quadrature points are NGSolve's own.
 """
 import ngsolve as ngs
@@ -18,7 +18,7 @@ import numpy as np
 import pytest
 
 import workbench
-from workbench import discretisation
+from workbench.discrete import discretisation
 from workbench.physics.ops import NGS, NP
 from workbench.physics.laws import LAWS
 

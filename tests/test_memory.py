@@ -78,7 +78,7 @@ def test_exponential_kernel_runs_match_the_quadrature_at_flat_cost():
     rule integrates a Prony term exactly against piecewise-linear u and a general kernel by the product trapezoid
     rule, so there the two differ by O(k^2).) It records the terms and the bound, keeps no history of u and
     applies the memory with one matvec per step, whatever the number of terms."""
-    from workbench import discretisation
+    from workbench.discrete import discretisation
     from workbench.schemes import scheme_class
 
     kernel = dict(prony=(), kernel=POWER_LAW, kernel_E=-1000.0, kernel_nu=0.3, h=0.1, k=0.02)

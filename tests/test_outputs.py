@@ -9,7 +9,7 @@ import pytest
 import xarray as xr
 
 import workbench
-from workbench.parameters import PARAMETERS
+from workbench.input.parameters import PARAMETERS
 
 
 def _cli(*args, cwd=None):
@@ -82,7 +82,8 @@ def test_model_b_overview_and_vtk_show_pressure_and_states(tmp_path):
     both as point data of the contact boundary."""
     import meshio
 
-    from workbench import plotting, vtk
+    from workbench import plotting
+    from workbench.output import vtk
 
     ds = workbench.run("memory_slab", h=0.25, k=0.1, snapshots=[0.5], progress=False)
     fig = plotting.overview(ds)

@@ -16,7 +16,7 @@ import numpy as np
 import pytest
 
 import workbench
-from workbench.world import alone
+from workbench.discrete.world import alone
 
 #: A block whose left half is pressed into the foundation and whose right half is pulled off it while the glue
 #: (normal and tangential) debonds: every contact term and the bonding law act.
@@ -179,16 +179,16 @@ def test_a_sweep_is_not_started_on_several_processes(tmp_path):
 
 
 def test_the_distributed_eigenvalue_iterations_agree_with_the_exact_eigenpair():
-    """The step limit's eigenvalue on several processes comes from :func:`workbench.eigen.lanczos_largest`
+    """The step limit's eigenvalue on several processes comes from :func:`workbench.discrete.eigen.lanczos_largest`
     (Lanczos in the K_A inner product, full reorthogonalisation; with the gathered factor) or from
-    :func:`workbench.eigen.lobpcg_smallest` (LOBPCG with the CG's preconditioner, no solves). Run here in one
+    :func:`workbench.discrete.eigen.lobpcg_smallest` (LOBPCG with the CG's preconditioner, no solves). Run here in one
     process on the slab's matrices with springs on the whole contact side (LOBPCG with a Jacobi preconditioner, far
     weaker than BDDC), both give the largest eigenvalue of K x = lambda K_A x of a dense solve (LAPACK) to 1e-6 and its
     eigenvector (1 - cos of the angle in the K inner product below 1e-6), and ARPACK's estimate (the serial one)."""
     import scipy.linalg as la
     import scipy.sparse as sp
 
-    from workbench import discretisation, eigen, solvers
+    from workbench.discrete import discretisation, eigen, solvers
 
     d = discretisation.build(workbench.scene("tp5", h=0.05, c_nu=100.0))
     free = np.nonzero(np.array(d.fes.FreeDofs(), dtype=bool))[0]

@@ -18,9 +18,9 @@ import numpy as np
 import pytest
 
 import workbench
-from workbench import vtk
+from workbench.output import vtk
 from workbench.paper import reproduction as reproduce
-from workbench.results import far_facet
+from workbench.output.results import far_facet
 
 #: Reduced sizes: the rod is exact in space (P1, linear solution), so tp1/tp2 keep the paper's
 #: k = h = 0.01 for the paper's error bounds; the slab runs on a coarse mesh.

@@ -20,7 +20,7 @@ import numpy as np
 import pytest
 
 import workbench
-from workbench.restart import NoRestartState, has_state, without_state
+from workbench.running.restart import NoRestartState, has_state, without_state
 
 ROOT = Path(__file__).resolve().parents[1]
 #: What must be equal bitwise: every record (and, with error control, the steps) and the snapshot fields.

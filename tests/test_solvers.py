@@ -3,7 +3,7 @@ import numpy as np
 import pytest
 
 import workbench
-from workbench import discretisation, solvers
+from workbench.discrete import discretisation, solvers
 
 
 @pytest.mark.parametrize("name, kw", [("slab", dict(h=0.05)), ("block", dict(h=0.1)), ("tp1", dict(h=0.1)),

@@ -3,7 +3,7 @@
 The slab of the stability issue: E = 1000, nu = 0.3, a1 = 30, a2 = 20, c_nu = 100,
 gamma_nu = 20, L = 0.3 (the paper's tp4/tp5 geometry and loads). Linearised
 stability of forward Euler on the elastic and contact terms gives
-k_crit = 2 / lambda_max(K_A^-1 (K_G + springs)) (workbench.stability).
+k_crit = 2 / lambda_max(K_A^-1 (K_G + springs)) (workbench.discrete.stability).
 References for the implicit scheme: the explicit scheme itself at a step far
 below k_crit (a different scheme, so not a self-comparison).
 """
@@ -13,9 +13,9 @@ import numpy as np
 import pytest
 
 import workbench
-from workbench import stability
-from workbench.results import far_facet
-from workbench.stability import StepTooLarge
+from workbench.discrete import stability
+from workbench.output.results import far_facet
+from workbench.discrete.stability import StepTooLarge
 
 STIFF = dict(c_nu=100.0, gamma_nu=20.0, L=0.3)
 

@@ -69,8 +69,8 @@ def test_a_study_process_keeps_dask():
 def test_the_probe_operator_is_ngsolves_point_evaluation(scene, values):
     """The probes are recorded through P (taken once from the unit vectors of the probe cells' dofs): P u equals
     NGSolve's own evaluation u(mesh(x, y)) at the probe points for a random dof vector, to round-off."""
-    from workbench import discretisation
-    from workbench.scenes import scene as make
+    from workbench.discrete import discretisation
+    from workbench.input.scenes import scene as make
 
     d = discretisation.build(make(scene, **values))
     d.u.vec.FV().NumPy()[:] = np.random.default_rng(3).standard_normal(d.ndof)

@@ -16,7 +16,7 @@ import pytest
 import xarray as xr
 
 import workbench
-from workbench import transfer
+from workbench.discrete import transfer
 from workbench.study import Study, fit_order
 
 
@@ -327,7 +327,7 @@ def test_study_whose_first_case_is_refused():
 def test_k_over_h_does_not_rebuild_the_scene(monkeypatch):
     """Study.__init__ rebuilt the already checked scene for nothing when k_over_h was given (an unused
     ``ratio = self.scene.with_()``): no call of Scene.with_ without overrides."""
-    from workbench.scenes import Scene
+    from workbench.input.scenes import Scene
 
     calls, real = [], Scene.with_
 

@@ -25,7 +25,7 @@ def test_import_leaves_the_process_alone_and_a_run_gives_the_pools_back():
 
 
 def test_blas_pools_start_single_threaded_in_a_workbench_process(tmp_path):
-    """The `workbench` command (a process of its own, :func:`workbench.threads.lean_process`): every OpenBLAS the run
+    """The `workbench` command (a process of its own, :func:`workbench.running.threads.lean_process`): every OpenBLAS the run
     loads (NumPy's, SciPy's, NGSolve's) starts with one thread, with no thread variables in the environment."""
     env = {k: v for k, v in os.environ.items() if not k.endswith("_NUM_THREADS")}
     code = ("import atexit, sys\n"
@@ -50,7 +50,7 @@ def test_a_run_holds_blas_at_one_thread_where_numpy_came_first(monkeypatch):
     from threadpoolctl import threadpool_info, threadpool_limits
 
     import workbench
-    from workbench import runner
+    from workbench.running import runner
 
     seen = []
     march, build = runner.march, runner.parallel.discretise

@@ -11,7 +11,7 @@ import pytest
 from scipy.interpolate import CubicSpline
 
 import workbench
-from workbench import discretisation
+from workbench.discrete import discretisation
 from workbench.references import modal_linear, rod_ode, tp1_exact
 from workbench.references.rod import rod_memory
 from workbench.schemes import scheme_class
@@ -266,7 +266,7 @@ def test_bdf2_steps_reuse_their_factorisations(monkeypatch):
     import math
 
     import workbench.schemes.implicit_euler as ie
-    from workbench import discretisation
+    from workbench.discrete import discretisation
     from workbench.schemes.bdf2 import BDF2
 
     scheme = BDF2(discretisation.build(workbench.scene("tp1", h=0.1)))

@@ -385,7 +385,7 @@ def test_disk_full_at_the_end_keeps_the_result(tmp_path, monkeypatch, capsys):
 _FULL_AT_THE_END = """
 import errno, sys
 import matplotlib.figure
-from workbench import vtk
+from workbench.output import vtk
 from workbench.cli import main
 
 def no_space(*args, **kwargs):
@@ -785,7 +785,7 @@ def test_run_stays_the_function_after_the_study_imports_the_runner():
     import subprocess
     import sys
 
-    code = ("import workbench.study, workbench.runner, workbench\n"
+    code = ("import workbench.study, workbench.running.runner, workbench\n"
             "ds = workbench.run('tp1', h=0.25, k=0.25, progress=False)\n"
             "print(type(workbench.run).__name__, ds.attrs['status'])")
     out = subprocess.run([sys.executable, "-c", code], capture_output=True, text=True, timeout=300)

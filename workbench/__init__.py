@@ -5,8 +5,8 @@ The public names (``run``, ``load``, ``write``, ``scene``, ``Scene``, ``Study``,
 neither NGSolve nor xarray (``workbench scenes``, ``workbench show``) start at once.
 
 ``import workbench`` changes nothing in the process: a run holds the BLAS thread pools at one thread while it
-computes and gives them back after (:mod:`workbench.threads`); the command line and the study workers, processes
-of workbench's own, start them with one thread (:func:`workbench.threads.lean_process`).
+computes and gives them back after (:mod:`workbench.running.threads`); the command line and the study workers, processes
+of workbench's own, start them with one thread (:func:`workbench.running.threads.lean_process`).
 
 >>> import workbench
 >>> ds = workbench.run("tp1", h=0.1, k=0.1, progress=False)
@@ -20,8 +20,8 @@ from .errors import Diverged, ParameterError
 __version__ = "0.1.0"
 __all__ = ["run", "load", "write", "scene", "Scene", "Study", "ParameterError", "Diverged"]
 
-_LAZY = {"run": "runner", "load": "results", "write": "results", "scene": "scenes", "Scene": "scenes",
-         "Study": "study"}
+_LAZY = {"run": "running.runner", "load": "output.results", "write": "output.results", "scene": "input.scenes",
+         "Scene": "input.scenes", "Study": "study"}
 
 
 def __getattr__(name):

@@ -61,7 +61,7 @@ def _overrides(args, swept=()) -> dict:
         if name in out:
             raise ParameterError(f"--set {name} is given twice ({out[name]!r} and {value.strip()!r}); give it once")
         out[name] = value.strip()
-    from .numerics import AXES
+    from .input.numerics import AXES
 
     for name in AXES + ("T",):
         value = getattr(args, name, None)
@@ -76,7 +76,7 @@ def _overrides(args, swept=()) -> dict:
 
 def _check_outputs(args, *, cases=None) -> None:
     """Every output target is checked before any work (a bad path would lose the whole run)."""
-    from .files import check_output
+    from .output.files import check_output
 
     if getattr(args, "output", None):
         check_output(args.output, "-o")
@@ -101,8 +101,8 @@ def _write_or_keep(ds, path=None):
     from datetime import datetime
     from pathlib import Path
 
-    from . import results
-    from .files import safe_name
+    from .output import results
+    from .output.files import safe_name
 
     err = None
     if path is not None:
@@ -146,7 +146,7 @@ def _write_extras(ds, outputs, kept) -> int:
 
 
 def cmd_scenes(args) -> int:
-    from .scenes import PRESETS
+    from .input.scenes import PRESETS
 
     width = max(map(len, PRESETS))
     for name, preset in PRESETS.items():
@@ -155,7 +155,7 @@ def cmd_scenes(args) -> int:
 
 
 def cmd_show(args) -> int:
-    from .scenes import scene
+    from .input.scenes import scene
 
     sc = scene(args.scene, **_overrides(args))
     print(f"{sc.name} ({sc.geometry}, {sc.dim}D, Model {sc.model}): {sc.description}")
@@ -179,7 +179,7 @@ def _status_line(ds) -> str:
 
 def cmd_run(args) -> int:
     from .errors import Diverged
-    from .runner import run
+    from .running.runner import run
 
     _check_outputs(args)
     overrides = _overrides(args)
@@ -216,7 +216,7 @@ def cmd_run(args) -> int:
         outputs.append(("--plot", args.plot, plot))
     if args.vtk:
         def vtk_files(path):
-            from . import vtk
+            from .output import vtk
 
             return f"wrote {len(vtk.export(ds, path))} VTK files to {path}/ (open the .pvd in ParaView)"
 
@@ -241,7 +241,7 @@ def _summary(ds) -> str:
 
 
 def _reference(text):
-    from .parameters import PARAMETERS
+    from .input.parameters import PARAMETERS
     from .values import closest_name
 
     if text in (None, "finest", "ode", "exact"):
@@ -269,7 +269,7 @@ def cmd_study(args) -> int:
     from .study import Study
 
     _check_outputs(args, cases=True)
-    from .numerics import AXES as axes
+    from .input.numerics import AXES as axes
 
     overrides = _overrides(args, swept=axes)
     given = {name: getattr(args, name) for name in axes if getattr(args, name) is not None}
@@ -313,7 +313,7 @@ def cmd_reproduce(args) -> int:
     from pathlib import Path
 
     from .errors import Diverged
-    from .files import check_output
+    from .output.files import check_output
     from .paper import reproduction
 
     check_output(args.out, "--out", folder=True)
@@ -402,7 +402,7 @@ def build_parser() -> argparse.ArgumentParser:
 def main(argv=None) -> int:
     import shlex
 
-    from .results import invocation
+    from .output.results import invocation
 
     argv = sys.argv[1:] if argv is None else list(argv)
     token = None
@@ -460,10 +460,11 @@ def _other_rank() -> bool:
 
 def console() -> int:
     """The ``workbench`` command, a process of its own: one that runs no sweep skips what it does not use
-    (:func:`workbench.threads.lean_process`, first: the module imports nothing heavy); ``study`` may send its cases to a dask cluster. On several MPI processes an
-    unexpected error on one rank ends them all (the others would wait for it in their next exchange)."""
+    (:func:`workbench.running.threads.lean_process`, first: the module imports nothing heavy); ``study`` may send
+    its cases to a dask cluster. On several MPI processes an unexpected error on one rank ends them all (the others
+    would wait for it in their next exchange)."""
     if sys.argv[1:2] != ["study"]:
-        from .threads import lean_process
+        from .running.threads import lean_process
 
         lean_process()
     try:

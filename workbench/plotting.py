@@ -13,7 +13,7 @@ import matplotlib.ticker
 import numpy as np
 from matplotlib.figure import Figure
 
-from .numerics import is_adaptive
+from .input.numerics import is_adaptive
 
 #: A perceptually uniform colour map for fields (not jet).
 FIELD_CMAP = "viridis"
@@ -38,7 +38,7 @@ def figure(nrows=1, ncols=1, *, figsize=(5, 3.8), squeeze=True, **kw):
 
 def _save(fig, path):
     if path is not None:
-        from .files import atomic_write
+        from .output.files import atomic_write
 
         atomic_write(path, lambda tmp: fig.savefig(tmp, format="png", dpi=150, bbox_inches="tight"))
     return fig
@@ -82,7 +82,7 @@ def overview(ds, path=None):
             ax.set(xlabel="t [s]", ylabel=f"u_{comp} [m]", title="displacement at probes")
             ax.legend(fontsize=7)
         elif panel == "beta":
-            from .results import far_facet
+            from .output.results import far_facet
 
             far = far_facet(ds.beta)
             ax.plot(ds.time, far)

@@ -1,6 +1,6 @@
 """A parameter's definition, and how a value given as text, TOML or Python is coerced and checked.
 
-:class:`Param` is one row of the parameter table (:mod:`workbench.parameters`): name, default, unit, meaning,
+:class:`Param` is one row of the parameter table (:mod:`workbench.input.parameters`): name, default, unit, meaning,
 kind and allowed range. A contact law declares the rows it adds with it (:mod:`workbench.physics.laws`), so this
 module sits below the physics and knows nothing of scenes.
 
@@ -16,9 +16,9 @@ import json
 import math
 import numbers
 from collections.abc import Iterable
+from dataclasses import dataclass
 
 import numpy as np
-from dataclasses import dataclass
 
 from .errors import ParameterError
 from .expressions import Expression, ExpressionError, parse

@@ -67,9 +67,9 @@ def check_mesh(nx: int, ny: int, W: float, H: float) -> bool:
 
 def check_matrices(nx: int, ny: int) -> bool:
     """Compare K_A, K_G with the package's assembled matrices (relative max difference)."""
-    from workbench import discretisation
-    from workbench.scenes import scene
-    from workbench.solvers import to_scipy
+    from workbench.discrete import discretisation
+    from workbench.input.scenes import scene
+    from workbench.discrete.solvers import to_scipy
 
     sc = scene("tp5", nx=nx, ny=ny)
     d = discretisation.build(sc)
@@ -95,8 +95,8 @@ def check_quadrature(nx: int = 10, ny: int = 2, seed: int = 0) -> tuple[int, int
         Points per facet of the rule that reproduces each form to round-off.
     """
     import ngsolve as ngs
-    from workbench import discretisation
-    from workbench.scenes import scene
+    from workbench.discrete import discretisation
+    from workbench.input.scenes import scene
 
     for order in range(5):
         ir = ngs.IntegrationRule(ngs.SEGM, order)

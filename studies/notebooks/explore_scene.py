@@ -77,7 +77,7 @@ try:
     get_ipython  # noqa: F821 - defined only inside IPython
     from ngsolve.webgui import Draw
 
-    from workbench import discretisation
+    from workbench.discrete import discretisation
 
     d = discretisation.build(scene)
     d.u.vec.FV().NumPy()[:] = last.u_dofs.values

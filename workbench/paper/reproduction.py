@@ -35,8 +35,8 @@ from pathlib import Path
 import numpy as np
 
 import workbench
+from workbench.output.results import far_facet
 from workbench.references import rod_ode, tp1_exact
-from workbench.results import far_facet
 
 from . import figures as paper_figures
 
@@ -317,7 +317,7 @@ def reproduce(problem, out=DEFAULT_OUT, h=None, k=None, side=True, vtk=False, **
     side : bool
         Also run :func:`side_studies` (cheap: one extra run).
     vtk : bool
-        Also write ParaView files to ``out/vtk`` (:func:`workbench.vtk.export`).
+        Also write ParaView files to ``out/vtk`` (:func:`workbench.output.vtk.export`).
     **overrides
         Other scene parameters.
 
@@ -337,7 +337,7 @@ def reproduce(problem, out=DEFAULT_OUT, h=None, k=None, side=True, vtk=False, **
     files = [workbench.write(ds, out / f"{problem}.nc")]
     files += make_figures(problem, ds, out, ref)
     if vtk:
-        from workbench import vtk as vtk_export
+        from workbench.output import vtk as vtk_export
 
         files += vtk_export.export(ds, out / "vtk", stem=problem)
     summary = {"problem": problem, "h": ds.attrs["h_max"], "k": ds.attrs["k_actual"],
@@ -347,7 +347,7 @@ def reproduce(problem, out=DEFAULT_OUT, h=None, k=None, side=True, vtk=False, **
 
 
 def _write_json(path, data):
-    from workbench.files import atomic_write
+    from workbench.output.files import atomic_write
 
     return atomic_write(path, lambda tmp: tmp.write_text(json.dumps(data, indent=1, sort_keys=True)))
 

@@ -2,7 +2,7 @@
 
 Parallelism is a property of the data here: a body distributed over the processes is a
 :class:`DistributedDiscretisation`, which carries its :class:`World` (the communicator and its
-reductions) and overrides the few methods of :class:`workbench.discretisation.Discretisation` that
+reductions) and overrides the few methods of :class:`workbench.discrete.discretisation.Discretisation` that
 depend on where the data lives (the solver of K_A, the step limit's operators, the dofs a rank
 counts, the state gathered into and scattered from the serial order, the recorder). The time loop,
 the step limit, restarts and the schemes call those methods and never ask how many processes run.
@@ -25,7 +25,7 @@ model on its part and runs the same time loop:
 Rank 0 also keeps a serial view of the body (:mod:`.order`): the archive, which rank 0 writes,
 has the serial run's layout and numbers to the solver's tolerance (tests/test_parallel.py).
 
-What runs: the schemes registered as ``distributed`` (:data:`workbench.numerics.SCHEMES`: Model A's
+What runs: the schemes registered as ``distributed`` (:data:`workbench.input.numerics.SCHEMES`: Model A's
 explicit scheme), P1 or P2, in 2D and 3D, on any body whose contact side holds no pinned vertex; the
 archive, its plot and its VTK files are rank 0's. Refused by name before any work (:func:`check`):
 the other schemes (they condense on the contact dofs), the rod, higher orders, the banded and
@@ -33,7 +33,7 @@ umfpack solvers. Restarts and checkpoints hold the state in the serial order, so
 archive goes on with one process or with another number of ranks, and a one-process archive on
 several.
 
-Started without a launcher (or with one process) :func:`world` is :data:`workbench.world.SERIAL`
+Started without a launcher (or with one process) :func:`world` is :data:`workbench.discrete.world.SERIAL`
 and :func:`discretise` builds the one-process discretisation.
 """
 from __future__ import annotations
@@ -44,10 +44,10 @@ import time
 
 import numpy as np
 
-from .. import discretisation
+from ..discrete import discretisation
+from ..discrete.world import SERIAL, Serial, launched
 from ..errors import ParameterError
-from ..numerics import SCHEMES
-from ..world import SERIAL, Serial, launched
+from ..input.numerics import SCHEMES
 from .algebra import DistributedOperators, DistributedSolver, owned
 from .order import GatheringRecorder, Shell
 
@@ -82,7 +82,7 @@ class World(Serial):
 @functools.lru_cache(maxsize=None)
 def world():
     """The :class:`World` when this process is one of several started by an MPI launcher, else
-    :data:`workbench.world.SERIAL`."""
+    :data:`workbench.discrete.world.SERIAL`."""
     size = launched()
     if size <= 1:
         return SERIAL

@@ -10,10 +10,10 @@ from __future__ import annotations
 
 import numpy as np
 
-from .. import solvers
-from ..eigen import lanczos_largest, lobpcg_smallest
+from ..discrete import solvers
+from ..discrete.eigen import lanczos_largest, lobpcg_smallest
+from ..discrete.solvers import CG_MAXITER, CG_TOL, Solver
 from ..errors import Diverged
-from ..solvers import CG_MAXITER, CG_TOL, Solver
 
 
 def status(vector, distributed: bool) -> None:
@@ -65,7 +65,7 @@ class DistributedSolver(Solver):
 
     def precondition(self, r: np.ndarray) -> np.ndarray:
         """The preconditioner (BDDC; ``cg`` only) applied to this rank's part of a residual: an approximate K_A^-1 r,
-        cumulated (the step limit's LOBPCG, :func:`workbench.eigen.lobpcg_smallest`)."""
+        cumulated (the step limit's LOBPCG, :func:`workbench.discrete.eigen.lobpcg_smallest`)."""
         self.x.data = self.pre.mat * self._distributed(r)
         return self.x.FV().NumPy().copy()
 
@@ -94,8 +94,8 @@ class DistributedSolver(Solver):
 class DistributedOperators:
     """K_G, K_A, its solve and the springs T^T diag(w s) T of a body distributed over MPI processes
     (:mod:`workbench.parallel`), applied to this rank's parts of dof vectors: the step limit's eigenvalue
-    (:func:`workbench.eigen.lanczos_largest`, or :func:`workbench.eigen.lobpcg_smallest` with CG's preconditioner),
-    the diagonals and the sums of shared dofs; the methods of :class:`workbench.eigen.SpringOperators`. Vectors x
+    (:func:`workbench.discrete.eigen.lanczos_largest`, or :func:`workbench.discrete.eigen.lobpcg_smallest` with CG's preconditioner),
+    the diagonals and the sums of shared dofs; the methods of :class:`workbench.discrete.eigen.SpringOperators`. Vectors x
     that are multiplied are cumulated; products K x are distributed (each rank its part of the sum); inner products
     of one of each are summed over the ranks."""
 

@@ -10,7 +10,7 @@ from __future__ import annotations
 
 import numpy as np
 
-from .. import discretisation
+from ..discrete import discretisation
 from .algebra import owned
 
 
@@ -214,7 +214,7 @@ def _serial_points(comm, side, serial_side):
 
 class GatheringRecorder:
     """The recorder of a distributed run: at the times the schedule of rank 0's ``recorder`` (a
-    :class:`workbench.results.Recorder` of the shell with the scheme's observer of the shell; None on the other
+    :class:`workbench.output.results.Recorder` of the shell with the scheme's observer of the shell; None on the other
     ranks) takes, every rank sends its part of u (and of v at the snapshots) and of beta, and rank 0 records the
     shell with the serial code."""
 

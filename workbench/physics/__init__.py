@@ -6,5 +6,5 @@ the contact side to a traction and knows its slope and which components it acts
 on (:mod:`.contact`, the laws in :mod:`.laws`), the bonding law maps the state to
 a debonding rate and knows its time updates (:mod:`.bonding`), a relaxation kernel
 knows its memory term (:mod:`.memory`), the compliant layer of Model B knows its
-nodal law (:mod:`.unilateral`). :mod:`workbench.models` builds them from a scene.
+nodal law (:mod:`.unilateral`). :mod:`workbench.input.models` builds them from a scene.
 """

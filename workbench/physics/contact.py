@@ -2,7 +2,7 @@
 
 Sign convention: u_nu = u . nu with nu the body's outward normal towards the
 foundation, positive = penetration; u_tau is the rest of u (the components along
-the foundation plane; :mod:`workbench.geometry` says which). The boundary
+the foundation plane; :mod:`workbench.input.geometry` says which). The boundary
 functional of the weak form is
 
     j(beta, u, w) = int_Gamma3 p_nu(u_nu, beta) w_nu + p_tau(u_tau, beta) . w_tau  da,

@@ -1,4 +1,4 @@
-"""Time schemes: each advances a :class:`~workbench.discretisation.Discretisation` one step (:mod:`.base`).
+"""Time schemes: each advances a :class:`~workbench.discrete.discretisation.Discretisation` one step (:mod:`.base`).
 
 ``explicit`` — the paper's fully discrete scheme (eqs. 7.1–7.4): viscous term
 implicit, elastic and contact terms lagged; one back-substitution per step.
@@ -8,7 +8,7 @@ condensed onto the contact dofs): unconditionally stable, first order.
 ``vi`` — Model B: one variational inequality per step (long memory, unilateral
 constraint with a compliant layer), primal-dual active set on the contact nodes.
 
-:data:`workbench.numerics.SCHEMES` is the one place a scheme is registered: its name,
+:data:`workbench.input.numerics.SCHEMES` is the one place a scheme is registered: its name,
 model, module and class. The scene's choices of ``scheme`` and each model's schemes come
 from it; the classes are imported when first used.
 """
@@ -17,7 +17,7 @@ from __future__ import annotations
 import importlib
 
 from ..errors import Diverged, NewtonFailed
-from ..numerics import SCHEMES
+from ..input.numerics import SCHEMES
 
 
 def scheme_class(name: str):

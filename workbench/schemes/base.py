@@ -2,7 +2,7 @@
 
 A time scheme is three small things, each a protocol with its defaults here:
 
-:class:`Scheme`, the **stepper**, advances one :class:`~workbench.discretisation.Discretisation`
+:class:`Scheme`, the **stepper**, advances one :class:`~workbench.discrete.discretisation.Discretisation`
 (which holds the state u, v and, for Model A, beta) from one time to the next. The time loop
 (:func:`workbench.schemes.stepping.march`) calls, in this order:
 
@@ -36,7 +36,7 @@ A time scheme is three small things, each a protocol with its defaults here:
     (:attr:`Scheme.state_variables`), so restarts archive them without knowing them.
 ``diagnostics() -> dict``
     Scalars of the last step (or of ``start``), recorded by name (units in
-    :data:`workbench.results.VARIABLES`).
+    :data:`workbench.output.results.VARIABLES`).
 ``observer(disc) -> Observer``
     What the recorder reads at a time (below), for the scheme's state in ``disc``.
 
@@ -60,7 +60,7 @@ inherits it; the loop calls it only when ``rtol > 0``):
     the step whose a0 lies on its grid (so that factorisations are met again).
 
 :class:`Observer`, the **observer**, is what a run records of the state at a time (the
-runner hands the recorder to the loop as a callback, :class:`workbench.results.Recorder`):
+runner hands the recorder to the loop as a callback, :class:`workbench.output.results.Recorder`):
 
 ``diagnostics()``, ``node_values(t) -> dict``
     The step's scalars; arrays per contact node (the contact pressure; Model B's state).
@@ -76,7 +76,7 @@ runner hands the recorder to the loop as a callback, :class:`workbench.results.R
 A run on several MPI processes records rank 0's serial view of the body: its observer is
 the scheme's observer of that view (``scheme.observer(view)``).
 
-Registration is one line in :data:`workbench.numerics.SCHEMES` (name -> model, module,
+Registration is one line in :data:`workbench.input.numerics.SCHEMES` (name -> model, module,
 class, what it can do); the scene's allowed values of ``scheme`` and each model's schemes
 come from it.
 """

@@ -14,7 +14,7 @@ converges from anywhere.
 Examples
 --------
 >>> import workbench
->>> from workbench import discretisation
+>>> from workbench.discrete import discretisation
 >>> nodes = ContactNodes(discretisation.build(workbench.scene("memory_slab", h=0.25)))
 >>> nodes.size, round(float(nodes.w.sum()), 12)  # the free contact vertices and their share of the side
 (8, 1.875)
@@ -61,7 +61,7 @@ class ContactNodes:
         P2), lumped by Simpson's rule (a vertex: 1/6 of each adjacent facet, a midpoint: 2/3 of its facet).
         s = B u, B the normal trace at those points (NGSolve's P2 edge functions are hierarchical, so a midpoint's
         u_nu involves its edge dof as well as the two vertices)."""
-        from ..boundary import ContactSide
+        from ..discrete.boundary import ContactSide
 
         d = self.d
         mid = ContactSide(d.fes, d.contact_name, d.geometry, rule=0)  # one point per facet: its midpoint

@@ -7,14 +7,14 @@ Per step n (k_n = t_n - t_{n-1}):
     beta_n = clip(beta_{n-1} - k_n P_B (gamma_nu beta_{n-1} R(u_{n-1,nu})^2 - eps_a)_+, 0, 1)
     sigma_n = P_Q [A eps(v_n) + G eps(u_{n-1})]
 
-The viscous matrix is factored once (:mod:`workbench.solvers`); the elastic term is
+The viscous matrix is factored once (:mod:`workbench.discrete.solvers`); the elastic term is
 a matvec with the matrix assembled once; the contact terms and the bonding rate are
 evaluated at the contact quadrature points with trace operators assembled once
-(:mod:`workbench.boundary`): one back-substitution per step and vector work.
+(:mod:`workbench.discrete.boundary`): one back-substitution per step and vector work.
 Contact is lagged, so the scheme is only conditionally stable: k < k_crit, which
 :meth:`ExplicitEuler.preflight` predicts before the run for the springs that act at the
 start (and within a trial first step), and which every step re-checks against the springs
-of its state (:class:`workbench.stability.StepLimit`).
+of its state (:class:`workbench.discrete.stability.StepLimit`).
 """
 from __future__ import annotations
 
@@ -22,7 +22,7 @@ import warnings
 
 import numpy as np
 
-from .. import stability
+from ..discrete import stability
 from ..errors import StepLimitExceeded
 from ..physics.ops import NP
 from .model_a import KelvinVoigtScheme
@@ -91,7 +91,7 @@ class ExplicitEuler(KelvinVoigtScheme):
         return self.checks
 
     def _springs(self, limit, u_nu=None, beta_q=None):
-        """The acting springs at the current state (:meth:`workbench.stability.StepLimit.slopes`)."""
+        """The acting springs at the current state (:meth:`workbench.discrete.stability.StepLimit.slopes`)."""
         d, side = self.d, self.d.side
         u = self.u_np
         if beta_q is None and self.beta_np is not None:

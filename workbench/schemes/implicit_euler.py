@@ -28,19 +28,19 @@ The bonding update (:meth:`workbench.physics.bonding.BondingLaw.exponential_step
 never leaves [0, beta_{n-1}], however stiff gamma is; it is exact while |u_nu| >= L
 (the saturated regime that dominates debonding) and first order otherwise.
 The displacement system is solved by semismooth Newton condensed onto the contact
-dofs (:mod:`workbench.condensation`): M is assembled from K_A and K_G and factored
+dofs (:mod:`workbench.discrete.condensation`): M is assembled from K_A and K_G and factored
 once per step size, each Newton iteration costs one small dense SPD solve, each step
 two back-substitutions. Newton iterations are recorded per step
 (``newton_iterations``); failure to converge stops the run with the step and time.
 """
 from __future__ import annotations
 
-import numpy as np
-
 from collections import OrderedDict
 
-from .. import solvers
-from ..condensation import CondensedNewton, CondensedSystem, ContactOperator
+import numpy as np
+
+from ..discrete import solvers
+from ..discrete.condensation import CondensedNewton, CondensedSystem, ContactOperator
 from ..physics.ops import NP
 from .base import ErrorControlled
 from .model_a import KelvinVoigtScheme, kink_event

@@ -21,7 +21,7 @@ A new rule is a subclass with :meth:`~MemoryRule.advance`, :meth:`~MemoryRule.fi
 Examples
 --------
 >>> import workbench
->>> from workbench import discretisation
+>>> from workbench.discrete import discretisation
 >>> d = discretisation.build(workbench.scene("memory_rod", h=0.25))
 >>> rule = rule_for(d, trapezoid=True)
 >>> type(rule).__name__, rule.order, [round(float(w), 6) for w in rule.implicit_weights(0.01)]

@@ -44,8 +44,8 @@ from collections import OrderedDict
 
 import numpy as np
 
-from .. import solvers
-from ..condensation import CondensedSystem
+from ..discrete import solvers
+from ..discrete.condensation import CondensedSystem
 from ..physics import unilateral
 from .base import ErrorControlled, Observer, Scheme, first_event
 from .contact_nodes import ContactNodes

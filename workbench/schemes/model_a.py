@@ -7,7 +7,7 @@ exert on it over its share of the side (:class:`KelvinVoigtObserver`).
 Examples
 --------
 >>> import workbench
->>> from workbench import discretisation
+>>> from workbench.discrete import discretisation
 >>> from workbench.schemes import scheme_class
 >>> d = discretisation.build(workbench.scene("tp5", h=0.1))
 >>> scheme = scheme_class("implicit")(d)

@@ -18,8 +18,8 @@ import sys
 
 import numpy as np
 
+from ..discrete.world import SERIAL
 from ..errors import Diverged
-from ..world import SERIAL
 
 
 def time_grid(T: float, k: float, times=None, sync=()) -> np.ndarray:
@@ -413,13 +413,13 @@ def march(disc, scheme, steps, observe, *, progress=None, limit=None, limit_orig
     """Advance ``scheme`` with the step controller ``steps``, handing each accepted state's time to ``observe``.
 
     ``observe(t, final=False, control=None)`` is the output callback (the runner's recorder:
-    :meth:`workbench.results.Recorder.record`; ``control``: an adaptive run's step size and error estimate). With an
+    :meth:`workbench.output.results.Recorder.record`; ``control``: an adaptive run's step size and error estimate). With an
     adaptive controller every step is judged (scaled local error, kinks inside it) and a rejected step is redone
     from the exact state before it (:meth:`~workbench.schemes.base.Scheme.state` / ``restore``). Stops with
     :class:`~workbench.errors.Diverged` at the first accepted step that :class:`_Guard` finds diverged; what was
     observed before is kept. ``limit_origin`` says in the message where the limit came from.
 
-    With ``resume`` the scheme, controller and observer hold a restored state (a restart, :mod:`workbench.restart`):
+    With ``resume`` the scheme, controller and observer hold a restored state (a restart, :mod:`workbench.running.restart`):
     the loop goes on from it, without ``start`` and the first record. ``after_step(t, n)`` is called after each
     accepted step is observed, ``n`` counting the steps from the run's start (the runner writes its checkpoints
     there).

@@ -24,9 +24,10 @@ from pathlib import Path
 import numpy as np
 import xarray as xr
 
-from .. import numerics, results, scenes
 from ..errors import ParameterError
-from ..results import attr_value
+from ..input import numerics, scenes
+from ..output import results
+from ..output.results import attr_value
 from . import evaluate, execute, reference
 from .cases import BASE_AXES, Case, canonical, expand, extension, fingerprint, inputs, positive_int, read_case
 from .evaluate import fit_order
@@ -145,7 +146,7 @@ class Study:
         Error-controlled cases have no grid: they are compared (and recorded) at the comparison times, which
         their step controller lands on; with only such cases these are n_compare equal stretches of [0, T].
         """
-        from ..runner import time_grid
+        from ..running.runner import time_grid
 
         T = self.scene["T"]
         every = self.cases + (self.reference.cases() if self.reference else [])
@@ -354,7 +355,7 @@ def _base_scene(scene, overrides, grid, couple):
 def _history(study) -> str:
     from datetime import datetime, timezone
 
-    from ..results import brief, invocation
+    from ..output.results import brief, invocation
 
     stamp = datetime.now(timezone.utc).strftime("%Y-%m-%dT%H:%M:%SZ")
     axes = ", ".join(f"{k}={brief(v)}" for k, v in study.axes.items() if len(v) > 1)

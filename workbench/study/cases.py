@@ -33,8 +33,8 @@ from pathlib import Path
 import numpy as np
 
 from ..errors import ParameterError
-from ..numerics import AXES as BASE_AXES
-from ..numerics import REFINEMENT, is_adaptive
+from ..input.numerics import AXES as BASE_AXES
+from ..input.numerics import REFINEMENT, is_adaptive
 
 _PREFIX = {"h": "h", "k": "k", "order": "p", "scheme": ""}
 
@@ -94,7 +94,7 @@ class Case:
 def _values(name, values) -> list:
     """A sweep axis as a list: a sequence of values or a single value; text is refused (it would be read
     character by character), but for a choice (``scheme="explicit"``), where it is one value."""
-    from ..parameters import PARAMETERS
+    from ..input.parameters import PARAMETERS
 
     if isinstance(values, str) and name in PARAMETERS and PARAMETERS[name].kind == "choice":
         values = [values]
@@ -147,7 +147,7 @@ def expand(scene, grids, couple) -> tuple[list, dict]:
 
 def _coerce(scene, name, value):
     """A sweep value as the scene would hold it (numbers from text, choices checked)."""
-    from ..parameters import PARAMETERS
+    from ..input.parameters import PARAMETERS
 
     param = PARAMETERS.get(name)
     if param is None:
@@ -186,7 +186,7 @@ def fingerprint(obj) -> str:
 def read_case(path: Path, expected: dict):
     """(Dataset, None) if ``path`` holds the case made from ``expected``; else (None, reason) or (None, None)
     if there is no file."""
-    from .. import results
+    from ..output import results
 
     path = Path(path)
     if not path.exists():
@@ -211,7 +211,7 @@ def extension(path: Path, expected: dict):
     """(plan, None) if the case archived at ``path`` can be continued to the case of ``expected`` (a longer T,
     all else equal); else (None, reason).
 
-    The continued case is the restart of the archived run (:mod:`workbench.restart`) to the new T, recording the
+    The continued case is the restart of the archived run (:mod:`workbench.running.restart`) to the new T, recording the
     old records and the new ones after the old T. It is possible when the archive holds its final state, its run
     took fixed steps (an error-controlled run landed on its own T, which a run straight to the new T does not),
     its record times are those of the new case up to the old T and its snapshots include the new case's
@@ -219,7 +219,8 @@ def extension(path: Path, expected: dict):
     ``record_times`` for the continued run (the archive's up to its T, the new case's after), ``keep`` (the new
     case's snapshot times).
     """
-    from .. import restart, results
+    from ..output import results
+    from ..running import restart
 
     try:
         ds = results.load(path)

@@ -19,7 +19,7 @@ import warnings
 import numpy as np
 import xarray as xr
 
-from ..numerics import REFINEMENT
+from ..input.numerics import REFINEMENT
 
 NORMS = ("error", "error_V", "error_Q", "error_beta", "error_beta_end")
 COSTS = ("wall_time", "cpu_time", "setup_time", "memory_peak_mb", "h_max")

@@ -25,8 +25,8 @@ import warnings
 _HEADER = struct.Struct(">Q")
 #: A worker's whole program (:mod:`workbench.study.worker`; ``python -m workbench.study.worker`` would import
 #: ``workbench.study``, so xarray, first).
-START = ("import sys; from workbench import threads; threads.die_with_parent(int(sys.argv[1])); threads.lean_process(); "
-         "from workbench.study.worker import main; main()")
+START = ("import sys; from workbench.running import threads; threads.die_with_parent(int(sys.argv[1])); "
+         "threads.lean_process(); from workbench.study.worker import main; main()")
 
 
 def run_case(scene, case_values, record_times, snapshots, extra_attrs, extend=None):
@@ -40,7 +40,7 @@ def run_case(scene, case_values, record_times, snapshots, extra_attrs, extend=No
     import xarray as xr
 
     from ..errors import Diverged, StepTooLarge
-    from ..runner import run
+    from ..running.runner import run
 
     _peak_memory_reset()  # workers are reused: the peak must be this case's
     restart = None
@@ -139,8 +139,8 @@ def subprocesses(tasks, n_workers: int):
     if not tasks:
         return
     n = max(1, min(n_workers, len(tasks)))
-    from ..threads import single_threaded
-    from ..world import alone
+    from ..discrete.world import alone
+    from ..running.threads import single_threaded
 
     env = single_threaded(alone())  # (a case each, alone)
     workers = [subprocess.Popen([sys.executable, "-c", START, str(os.getpid())],

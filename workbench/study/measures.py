@@ -26,7 +26,7 @@ from __future__ import annotations
 import numpy as np
 import xarray as xr
 
-from ..results import far_facet
+from ..output.results import far_facet
 
 __all__ = ["computed", "normal_displacement", "tip", "beta_far", "penetration", "run_records", "summary"]
 
@@ -55,7 +55,7 @@ def tip(ds: xr.Dataset) -> np.ndarray:
 
 
 def beta_far(ds: xr.Dataset) -> np.ndarray:
-    """beta(t) on the contact facet farthest along x (the slab's (1, 0)): :func:`workbench.results.far_facet`."""
+    """beta(t) on the contact facet farthest along x (the slab's (1, 0)): :func:`workbench.output.results.far_facet`."""
     return far_facet(ds.beta).values
 
 
@@ -64,7 +64,7 @@ def penetration(ds: xr.Dataset) -> float:
 
     Examples
     --------
-    >>> from workbench.runner import run
+    >>> from workbench.running.runner import run
     >>> ds = run("slab", h=0.1, k=0.05, T=0.1, traction_top="(0, -1)", progress=False)
     >>> penetration(ds) > 0  # pressed into the foundation
     True
@@ -75,7 +75,7 @@ def penetration(ds: xr.Dataset) -> float:
 def run_records(ds: xr.Dataset, max_records: int | None = None) -> xr.Dataset:
     """The records that a plain :func:`workbench.run` keeps, from a run recorded at every step.
 
-    A plain run of more than ``max_records`` (default :data:`workbench.runner.MAX_RECORDS`) steps keeps
+    A plain run of more than ``max_records`` (default :data:`workbench.running.runner.MAX_RECORDS`) steps keeps
     t = 0, T and one step whenever T / max_records has passed since the last kept one; a study case
     records every step of its grid. Measures that are maxima over the recorded times (the penetration,
     the largest increase of beta, a first crossing time) then see the same records as a plain run of
@@ -94,7 +94,7 @@ def run_records(ds: xr.Dataset, max_records: int | None = None) -> xr.Dataset:
     >>> kept.sizes["time"], kept.step.values[:3].tolist(), int(kept.step[-1])
     (1668, [0, 3, 6], 5000)
     """
-    from ..runner import MAX_RECORDS
+    from ..running.runner import MAX_RECORDS
 
     max_records = MAX_RECORDS if max_records is None else int(max_records)
     n_steps = int(ds.attrs.get("nsteps", ds.sizes.get("time", 1) - 1))
@@ -108,7 +108,7 @@ def run_records(ds: xr.Dataset, max_records: int | None = None) -> xr.Dataset:
     spacing = T / max_records
     final = abs(t[-1] - T) <= 1e-9 * max(1.0, T) and len(t) == n_steps + 1
     keep, last = [0], t[0]
-    for i in range(1, len(t)):  # the rule of workbench.results.Recorder
+    for i in range(1, len(t)):  # the rule of workbench.output.results.Recorder
         if (final and i == len(t) - 1) or t[i] - last >= spacing * (1 - 1e-9):
             keep.append(i)
             last = t[i]
@@ -128,7 +128,7 @@ def summary(ds: xr.Dataset) -> dict:
 
     Examples
     --------
-    >>> from workbench.runner import run
+    >>> from workbench.running.runner import run
     >>> s = summary(run("tp4", h=0.1, k=0.05, T=0.1, scheme="implicit", progress=False))
     >>> s["steps_done"], s["beta_in_range"], s["beta_monotone"], s["newton_max"] >= 1
     (2, 1, 1, True)

@@ -8,7 +8,7 @@ far end of the contact side ``error_beta_end``.
 
 * :class:`RunReference` — a separate, finer run of the same scene (or the finest
   case of the sweep, which is then not reported as a case); fields are compared
-  on the finer of the two meshes (:mod:`workbench.transfer`). Cases that differ
+  on the finer of the two meshes (:mod:`workbench.discrete.transfer`). Cases that differ
   in a physical parameter (``c_nu``, ``gamma_nu``, ...) each get their own
   reference run; cases that differ only in their discretisation share one.
 * :class:`SolutionReference` — an exact or ODE/Volterra solution of a rod scene
@@ -23,10 +23,10 @@ import json
 
 import numpy as np
 
-from .. import transfer
+from ..discrete import transfer
 from ..errors import ParameterError
-from ..results import far_facet
-from ..numerics import DISCRETISATION
+from ..input.numerics import DISCRETISATION
+from ..output.results import far_facet
 from .cases import Case
 
 

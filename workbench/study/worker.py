@@ -1,11 +1,11 @@
 """A study worker: ``python -c "$START" PARENT_PID`` (:data:`workbench.study.execute.START`: a process of its own
 that runs scenes only, which starts its BLAS pools with one thread and skips dask before anything imports xarray:
-:func:`workbench.threads.lean_process`).
+:func:`workbench.running.threads.lean_process`).
 
 Reads tasks (pickled argument tuples of :func:`workbench.study.execute.run_case`)
 from standard input, answers each with ``("ok", Dataset)`` or ``("error",
 traceback)`` on its own copy of standard output, and exits at end of input or
-when its parent dies (:func:`workbench.threads.die_with_parent`, the program's first
+when its parent dies (:func:`workbench.running.threads.die_with_parent`, the program's first
 call, before anything heavy is imported). Whatever the run prints goes to standard error, so it
 cannot corrupt the channel.
 """

@@ -1,7 +1,7 @@
 """The largest eigenvalue of a body on boundary springs, K x = lambda K_A x with K = K_G + T^T diag(w s) T: what the
-explicit scheme's step limit needs (:mod:`workbench.stability`), as linear algebra.
+explicit scheme's step limit needs (:mod:`workbench.discrete.stability`), as linear algebra.
 
-A discretisation hands out the operators of its body (:meth:`workbench.discretisation.Discretisation.springs`):
+A discretisation hands out the operators of its body (:meth:`workbench.discrete.discretisation.Discretisation.springs`):
 :class:`SpringOperators` on one process, assembled with SciPy and solved by Lanczos (ARPACK) with the factored
 K_A, or by LOBPCG with an iterative solver's preconditioner; a body distributed over MPI processes has its own
 (:class:`workbench.parallel.algebra.DistributedOperators`), which runs :func:`lanczos_largest` or
@@ -22,8 +22,8 @@ import numpy as np
 import scipy.sparse as sp
 from scipy.sparse.linalg import ArpackError, ArpackNoConvergence, LinearOperator, eigsh
 
+from ..errors import ParameterError
 from . import solvers
-from .errors import ParameterError
 
 
 class SpringOperators:

@@ -1,8 +1,8 @@
 """Scenes: one modelled situation (geometry, material, loads, contact physics) as checked data.
 
-A scene is a geometry (``rod`` 1D, ``slab`` 2D, ``block`` 3D: :mod:`workbench.geometry`),
-a model (A or B: :mod:`workbench.models`), and a dict of parameter values drawn from
-:data:`~workbench.parameters.PARAMETERS`. Built-in scenes are the bare geometries, the
+A scene is a geometry (``rod`` 1D, ``slab`` 2D, ``block`` 3D: :mod:`workbench.input.geometry`),
+a model (A or B: :mod:`workbench.input.models`), and a dict of parameter values drawn from
+:data:`~workbench.input.parameters.PARAMETERS`. Built-in scenes are the bare geometries, the
 paper's test problems ``tp1`` … ``tp5`` and the Model B scenes; a TOML file can start
 from any of them. Every value is checked when the scene is made, so nothing runs on
 bad input.
@@ -27,12 +27,12 @@ from pathlib import Path
 
 import numpy as np
 
-from .errors import ParameterError
+from ..errors import ParameterError
+from ..values import Param, closest_name, to_plain
 from .geometry import GEOMETRIES
 from .models import MODELS
 from .numerics import CONTROL, EXPLICIT, MEMORY, SCHEMES, SPACE, TIME, is_adaptive, schemes_of
 from .parameters import LAW_PARAMETERS, PARAMETERS
-from .values import Param, closest_name, to_plain
 
 try:  # Python >= 3.11
     import tomllib
@@ -237,18 +237,18 @@ class Scene:
 
     @cached_property
     def body(self):
-        """The geometry object (:mod:`workbench.geometry`) of this scene's values."""
+        """The geometry object (:mod:`workbench.input.geometry`) of this scene's values."""
         return GEOMETRIES[self.geometry].from_values(self.values)
 
     def model_of(self):
-        """The physics objects of this scene (:func:`workbench.models.from_scene`)."""
+        """The physics objects of this scene (:func:`workbench.input.models.from_scene`)."""
         from .models import from_scene
 
         return from_scene(self)
 
     @property
     def terms(self) -> tuple:
-        """The terms this scene declares; only these are assembled (see :mod:`workbench.models`)."""
+        """The terms this scene declares; only these are assembled (see :mod:`workbench.input.models`)."""
         return self.model_of().terms
 
     def with_(self, **overrides) -> "Scene":
@@ -396,7 +396,7 @@ def _check_consistency(name, body, v, model="A"):
         raise ParameterError(f"snapshots: time {bad[0]:g} is after T = {v['T']:g}; allowed: 0 <= t <= T")
     for key in ("elastic_tensor", "viscous_tensor"):
         if v.get(key):
-            from .physics.kelvin_voigt import Voigt
+            from ..physics.kelvin_voigt import Voigt
 
             Voigt(v[key], body.dim, key)  # checks shape, symmetry, definiteness
     _check_expressions(body, v)
@@ -409,7 +409,7 @@ def _check_consistency(name, body, v, model="A"):
 
 def _check_expressions(body, v):
     """Every expression is finite on the body at a few times in [0, T] (a division by zero fails here, not later)."""
-    from .expressions import Expression
+    from ..expressions import Expression
 
     coordinates = set("xyz"[: body.dim])
     for key, expr in v.items():

@@ -16,7 +16,7 @@ piecewise-constant test functions, on a second, one-point side.
 Examples
 --------
 >>> import workbench
->>> from workbench import discretisation
+>>> from workbench.discrete import discretisation
 >>> d = discretisation.build(workbench.scene("slab", h=0.1))
 >>> d.side.points, d.rate_side.points, round(float(d.side.weights.sum()), 12)  # 10 facets x 2 Gauss points; length 1
 (20, 10, 1.0)
@@ -39,7 +39,7 @@ class ContactSide:
         The displacement space (H1 in 1D, VectorH1 otherwise).
     name : str
         The contact boundary.
-    geometry : workbench.geometry.Geometry
+    geometry : workbench.input.geometry.Geometry
         Says which component is normal (and its sign) and which are tangential.
     rule : int
         Order of NGSolve's integration-rule space (its rule has order 2 ``rule``); ``rule = order``

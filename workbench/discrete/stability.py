@@ -5,7 +5,7 @@ elastic and contact terms, so (linearised) it is stable for
 k < k_crit = 2 / lambda_max(K_A^{-1} (K_G + D)), where D is the boundary spring
 matrix T^T diag(w s) T of the slopes s of the contact terms at the contact
 quadrature points. lambda_max comes from the discretisation's operators of the body on
-its springs (:meth:`workbench.discretisation.Discretisation.springs`, :mod:`workbench.eigen`:
+its springs (:meth:`workbench.discrete.discretisation.Discretisation.springs`, :mod:`workbench.discrete.eigen`:
 Lanczos with the factored K_A, or LOBPCG with an iterative solver's preconditioner),
 which on several MPI processes reduce their products over the ranks.
 
@@ -40,7 +40,7 @@ from dataclasses import dataclass
 import numpy as np
 import scipy.sparse as sp
 
-from .errors import StepTooLarge
+from ..errors import StepTooLarge
 
 __all__ = ["Estimate", "StepLimit", "critical_step", "check", "StepTooLarge"]
 
@@ -76,8 +76,8 @@ def critical_step(disc_or_scene, solver=None) -> Estimate:
 
     ``solver`` (the factored K_A, e.g. the explicit scheme's) avoids refactoring.
     """
+    from ..input.scenes import Scene
     from . import discretisation
-    from .scenes import Scene
 
     d = discretisation.build(disc_or_scene) if isinstance(disc_or_scene, Scene) else disc_or_scene
     s_nu, s_tau = d.model.contact.max_slope(d.model.beta0)
@@ -94,7 +94,7 @@ class StepLimit:
 
     Parameters
     ----------
-    disc : workbench.discretisation.Discretisation
+    disc : workbench.discrete.discretisation.Discretisation
         Model A's, with its contact side.
     solver
         The factored K_A (the explicit scheme's).

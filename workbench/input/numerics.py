@@ -1,6 +1,6 @@
 """How a problem is discretised and solved, apart from what is modelled: the numerical options as one object.
 
-A scene's values hold physics and numerics side by side (one table of parameters, :mod:`workbench.parameters`);
+A scene's values hold physics and numerics side by side (one table of parameters, :mod:`workbench.input.parameters`);
 this module is the one place that says which of them are numerics, and the one registry of the time schemes.
 :class:`Numerics` is built beside the model from a scene (:func:`from_scene`), frozen, and is what the schemes,
 the solvers, the runner, restarts and studies consult: the scheme and its step control, the element order, the
@@ -120,5 +120,5 @@ def from_values(values: dict, threads: int | None = None) -> Numerics:
 
 
 def from_scene(scene, threads: int | None = None) -> Numerics:
-    """The numerics of a checked scene (:class:`workbench.scenes.Scene`)."""
+    """The numerics of a checked scene (:class:`workbench.input.scenes.Scene`)."""
     return from_values(scene.values, threads)

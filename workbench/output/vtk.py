@@ -16,7 +16,7 @@ For a Dataset with snapshots, :func:`export` writes, for snapshot ``i`` (time ``
 * ``{stem}.pvd`` and ``{stem}_contact.pvd`` — collections listing the files with
   their times (open these in ParaView to get the time series).
 
-Every file is written atomically (:func:`workbench.files.atomic_write`); the stem (the
+Every file is written atomically (:func:`workbench.output.files.atomic_write`); the stem (the
 scene's name by default) is made safe for the file system, so files stay inside ``folder``.
 
 Examples

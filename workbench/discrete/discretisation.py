@@ -3,7 +3,7 @@
 Built once per run, before time stepping. The volume matrices (Model A: viscous K_A
 and elastic K_G; Model B: the elastic K_A and one stiffness per relaxation tensor)
 are assembled here once; the contact side is prepared as quadrature points with
-trace operators (:mod:`workbench.boundary`), only for the terms the model declares
+trace operators (:mod:`workbench.discrete.boundary`), only for the terms the model declares
 (no contact and no adhesion: none; no adhesion: no beta field). Index arrays into
 the dof vector (contact nodes, probes, the point force, Dirichlet dofs) are
 computed here, so the time loop does only vector work.
@@ -14,7 +14,7 @@ definition the fast path is checked against; they are built only when asked for.
 
 Examples
 --------
->>> from workbench.scenes import scene
+>>> from workbench.input.scenes import scene
 >>> d = build(scene("tp1", h=0.1))
 >>> d.ndof, d.beta_dofs.size, d.contact_form is not None
 (11, 1, True)
@@ -26,10 +26,10 @@ from functools import cached_property
 import ngsolve as ngs
 import numpy as np
 
-from . import numerics as numerics_of
+from ..input import numerics as numerics_of
+from ..physics import kelvin_voigt
+from ..physics.ops import NGS
 from .boundary import ContactSide
-from .physics import kelvin_voigt
-from .physics.ops import NGS
 from .world import SERIAL
 
 
@@ -53,13 +53,13 @@ class Discretisation:
     model : ModelA or ModelB
     scene : Scene
         For its probes, snapshots and name.
-    numerics : workbench.numerics.Numerics
+    numerics : workbench.input.numerics.Numerics
         The element order, the solver and the scheme's options.
-    world : workbench.world.Serial
-        The processes that hold the body (one: :data:`workbench.world.SERIAL`; a body distributed over MPI
+    world : workbench.discrete.world.Serial
+        The processes that hold the body (one: :data:`workbench.discrete.world.SERIAL`; a body distributed over MPI
         processes is a :class:`workbench.parallel.DistributedDiscretisation`, which overrides the methods of the
         section "where the data lives" below).
-    geometry : workbench.geometry.Geometry
+    geometry : workbench.input.geometry.Geometry
     mesh, fes : the mesh and the displacement space (H1 in 1D, VectorH1 otherwise)
     t : ngsolve.Parameter
         The time at which space- and time-dependent loads are assembled.
@@ -114,7 +114,7 @@ class Discretisation:
 
     def viscous_solver(self, iterative: bool = True):
         """K_A factored (or, ``iterative`` and in 3D beyond the factor's memory, solved by AMG-preconditioned CG) with
-        the scene's ``solver`` (:func:`workbench.solvers.choose`)."""
+        the scene's ``solver`` (:func:`workbench.discrete.solvers.choose`)."""
         from . import solvers
 
         method = solvers.choose(self.numerics.solver, self.dim, self.ndof, iterative=iterative)
@@ -122,7 +122,7 @@ class Discretisation:
 
     def springs(self, solver):
         """The operators of the body on boundary springs with K_A solved by ``solver``: the explicit scheme's step
-        limit (:class:`workbench.eigen.SpringOperators`)."""
+        limit (:class:`workbench.discrete.eigen.SpringOperators`)."""
         from .eigen import SpringOperators
 
         return SpringOperators(self, solver)
@@ -324,7 +324,7 @@ class Discretisation:
         return form
 
     def _normal_and_tangential(self, u):
-        """(u_nu, u_tau) as coefficient functions, with the foundation's normal (:mod:`workbench.geometry`)."""
+        """(u_nu, u_tau) as coefficient functions, with the foundation's normal (:mod:`workbench.input.geometry`)."""
         g = self.geometry
         if self.dim == 1:
             return g.normal_sign * u, None
@@ -472,17 +472,17 @@ def bonding_space(mesh, dim: int, name: str):
 
 def build(model_or_scene, scene=None, numerics=None) -> Discretisation:
     """Assemble the constant parts of a model on its mesh (a Scene is turned into its model first; ``numerics``:
-    :func:`workbench.numerics.from_scene` by default). One process: a body distributed over MPI processes is built by
+    :func:`workbench.input.numerics.from_scene` by default). One process: a body distributed over MPI processes is built by
     :func:`workbench.parallel.discretise`.
 
     Examples
     --------
-    >>> from workbench.scenes import scene
+    >>> from workbench.input.scenes import scene
     >>> d = build(scene("memory_slab", h=0.25))
     >>> d.viscous is None, d.memory_kind, round(float(d.contact_weights.sum()), 12)
     (True, 'prony', 2.0)
     """
-    from .scenes import Scene
+    from ..input.scenes import Scene
 
     if isinstance(model_or_scene, Scene):
         scene, model = model_or_scene, model_or_scene.model_of()

@@ -1,7 +1,7 @@
 """From a scene to its model: typed physics objects, built once.
 
-A scene is checked values (:mod:`workbench.scenes`); a model is what those values
-mean: the body (:mod:`workbench.geometry`), the material tensors, the contact
+A scene is checked values (:mod:`workbench.input.scenes`); a model is what those values
+mean: the body (:mod:`workbench.input.geometry`), the material tensors, the contact
 terms and the bonding law (Model A), or the relaxation kernel and the compliant
 layer (Model B), and the loads. Discretisation, schemes, the stability estimate
 and the condensed Newton take these objects, never the scene's physics values
@@ -26,13 +26,13 @@ from __future__ import annotations
 from dataclasses import dataclass, field
 from typing import ClassVar, Protocol
 
+from ..physics import kelvin_voigt
+from ..physics.contact import Contact
+from ..physics.laws import LAWS
+from ..physics.laws.adhesion import bonding_law
+from ..physics.memory import GeneralKernel, Prony
+from ..physics.unilateral import Layer
 from .numerics import schemes_of
-from .physics import kelvin_voigt
-from .physics.contact import Contact
-from .physics.laws import LAWS
-from .physics.laws.adhesion import bonding_law
-from .physics.memory import GeneralKernel, Prony
-from .physics.unilateral import Layer
 
 
 @dataclass(frozen=True)
@@ -55,7 +55,7 @@ class Model(Protocol):
     kind : str
         Its letter as scenes and archives name it ("A", "B").
     schemes : tuple of str
-        The time schemes that step it (:data:`workbench.numerics.SCHEMES`).
+        The time schemes that step it (:data:`workbench.input.numerics.SCHEMES`).
     geometry, loads
         The body and its loads.
     elastic : tensor

@@ -28,9 +28,8 @@ import ngsolve as ngs
 import numpy as np
 import scipy.sparse as sp
 
-from .discretisation import bonding_space
-from .physics import kelvin_voigt
-from .discretisation import mesh_cells
+from ..physics import kelvin_voigt
+from .discretisation import bonding_space, mesh_cells
 
 
 class MeshInfo:
@@ -127,7 +126,7 @@ def _body_info(body, order) -> MeshInfo:
 
 @lru_cache(maxsize=16)
 def _mesh_info(kind, extent, cells, order) -> MeshInfo:
-    from .geometry import GEOMETRIES
+    from ..input.geometry import GEOMETRIES
 
     cls = GEOMETRIES[kind]
     return MeshInfo(cls(h=1.0, cells=cells, **dict(zip(cls.extent_names, extent))), order)

@@ -27,7 +27,7 @@ from __future__ import annotations
 import functools
 from typing import TYPE_CHECKING
 
-from .errors import ParameterError
+from ..errors import ParameterError
 
 #: How many meshes (read from files, or of the Hertz bodies) a process keeps for reuse: a sweep over h meets each
 #: mesh again for its reference and comparisons; an unbounded cache grew with every size a session tried.
@@ -235,7 +235,7 @@ class Block(Geometry):
 
 
 class MeshBody(Geometry):
-    """A body from a mesh file (:mod:`workbench.meshes`), its boundaries given roles.
+    """A body from a mesh file (:mod:`workbench.input.meshes`), its boundaries given roles.
 
     ``roles`` maps every boundary name of the mesh to ``clamped`` (all components fixed),
     ``traction`` (carries the scene's ``traction``), ``contact`` (faces the foundation) or
@@ -375,7 +375,7 @@ def _cached_mesh(path, digest):
 
 
 def _closest(name, known):
-    from .values import closest_name
+    from ..values import closest_name
 
     return closest_name(name, known)
 
@@ -461,7 +461,7 @@ class HalfDisc(_Indenter):
         return ((0.0, 0.0), (0.0, 0.5 * R), (0.0, R), (R, R))
 
     def tractions(self, values):
-        from .expressions import parse
+        from ..expressions import parse
 
         R = self.extent[0]  # the total load over the whole flat side (width 2R), per unit thickness
         return {"top": parse(f"(0, -({values['load'].source}) / {2.0 * R!r})", name="load", size=2)}
@@ -485,7 +485,7 @@ class Hemisphere(_Indenter):
     def tractions(self, values):
         import ngsolve as ngs
 
-        from .expressions import parse
+        from ..expressions import parse
 
         # the total load over the whole flat disc: 4 x the meshed quarter's area (its polygon, not pi R^2 / 4, so
         # that the force is the load exactly)
@@ -511,7 +511,7 @@ def _indenter_mesh(kind, R, h, h_contact, contact_zone=CONTACT_ZONE):
     once per process and size while it is among the last few used."""
     import math
 
-    from netgen.occ import Z, ArcOfCircle, Box, Cylinder, Face, Glue, MoveTo, OCCGeometry, Pnt, Segment, Sphere, Wire
+    from netgen.occ import ArcOfCircle, Box, Cylinder, Face, Glue, MoveTo, OCCGeometry, Pnt, Segment, Sphere, Wire, Z
 
     tol, w = 1e-9 * R, contact_zone * R
 

@@ -38,8 +38,9 @@ from pathlib import Path
 import numpy as np
 import xarray as xr
 
-from . import numerics, results, scenes
-from .errors import ParameterError
+from ..errors import ParameterError
+from ..input import numerics, scenes
+from ..output import results
 
 PREFIX = "state_"
 ATTR = "state_json"

@@ -172,7 +172,7 @@ class AMGConjugateGradient(Solver):
         self.iterations += count[0]
         self.solves += 1
         if info != 0:
-            from .errors import Diverged
+            from ..errors import Diverged
 
             residual = float(np.linalg.norm(b - self.matrix @ x) / max(np.linalg.norm(b), 1e-300))
             raise Diverged(f"the conjugate gradient solve (solver = 'cg') did not converge: relative residual "

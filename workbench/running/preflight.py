@@ -19,8 +19,8 @@ from __future__ import annotations
 import math
 from dataclasses import dataclass
 
-from .errors import ParameterError
-from .numerics import SCHEMES
+from ..errors import ParameterError
+from ..input.numerics import SCHEMES
 
 
 @dataclass(frozen=True)
@@ -43,9 +43,9 @@ def available_memory() -> float:
 
 def estimate(geometry, order: int, solver: str = "auto", iterative: bool = False) -> Estimate:
     """Displacement dofs and bytes to assemble and factor the constant matrix (order of magnitude); with ``solver =
-    "cg"``, or ``"auto"`` where it resolves to cg (``iterative``: the explicit scheme, :func:`workbench.solvers.choose`),
+    "cg"``, or ``"auto"`` where it resolves to cg (``iterative``: the explicit scheme, :func:`workbench.discrete.solvers.choose`),
     the matrix copy and the AMG hierarchy of the iterative solver instead of a factor."""
-    from .solvers import choose, sparse_factor_bytes
+    from ..discrete.solvers import choose, sparse_factor_bytes
 
     dim = geometry.dim
     vertices = geometry.vertex_count()
@@ -107,7 +107,7 @@ def _contact_zone(scene, g) -> list:
         return []
     import numpy as np
 
-    from .references import hertz
+    from ..references import hertz
 
     P = max(float(scene["load"](t=t)) for t in np.linspace(0.0, scene["T"], 101))
     if P <= 0:

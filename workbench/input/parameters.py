@@ -17,9 +17,9 @@ workbench.errors.ParameterError: nu = 0.5 is outside the allowed range -1 < nu <
 """
 from __future__ import annotations
 
+from ..physics.laws import LAWS
+from ..values import Param, closest_name, to_plain  # noqa: F401 (the table's row type and helpers, imported from here)
 from .numerics import SCHEMES
-from .physics.laws import LAWS
-from .values import Param, closest_name, to_plain  # noqa: F401 (the table's row type and helpers, imported from here)
 
 
 def _p(name, default, unit, meaning, kind="float", **kw) -> Param:

@@ -34,7 +34,7 @@ from pathlib import Path
 import numpy as np
 import xarray as xr
 
-from .values import to_plain
+from ..values import to_plain
 
 COMPONENTS = ("x", "y", "z")
 STRESS_COMPONENTS = {1: ("xx",), 2: ("xx", "yy", "xy"), 3: ("xx", "yy", "zz", "yz", "xz", "xy")}
@@ -236,7 +236,7 @@ class Recorder:
 
     def snapshot(self, t: float) -> None:
         """Keep the whole field: u, the P0 stress sigma_h = P_Q[...] and its von Mises norm."""
-        from .physics.kelvin_voigt import stress_and_von_mises
+        from ..physics.kelvin_voigt import stress_and_von_mises
 
         d = self.disc
         parts = [(tensor, d.cell_strains(vector)) for tensor, vector in self.observer.stress_parts()]
@@ -366,7 +366,7 @@ ATTR_UNITS = {"h_max": "m", "k_actual": "s", "k_crit": "s", "k_crit_min": "s", "
 def provenance(scene, extra: dict, call: str = "", terms=None) -> dict:
     """Dataset attributes: CF conventions, every scene parameter with its units (``NAME_units``), the
     discretisation, cost, versions and a ``history`` line with the full command or call."""
-    from .parameters import PARAMETERS
+    from ..input.parameters import PARAMETERS
 
     attrs = {"Conventions": "CF-1.10 UGRID-1.0", "title": f"workbench run of scene {scene.name}: {scene.description}",
              "scene": scene.name, "base_scene": scene.base, "geometry": scene.geometry,
@@ -386,7 +386,7 @@ def provenance(scene, extra: dict, call: str = "", terms=None) -> dict:
 
 
 def write(ds: xr.Dataset, path) -> Path:
-    """Write ``ds`` to netCDF atomically (:func:`workbench.files.atomic_write`)."""
+    """Write ``ds`` to netCDF atomically (:func:`workbench.output.files.atomic_write`)."""
     from .files import atomic_write
 
     return atomic_write(path, lambda tmp: ds.to_netcdf(tmp, engine="netcdf4"))

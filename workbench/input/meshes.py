@@ -33,7 +33,7 @@ from pathlib import Path
 
 import numpy as np
 
-from .errors import ParameterError
+from ..errors import ParameterError
 
 #: File suffixes read as meshes.
 SUFFIXES = (".msh", ".vol", ".vol.gz")

@@ -24,7 +24,7 @@ import re
 import secrets
 from pathlib import Path
 
-from .errors import ParameterError
+from ..errors import ParameterError
 
 
 def _umask() -> int:

@@ -16,14 +16,17 @@ from pathlib import PurePath
 
 import numpy as np
 
-from . import numerics as numerics_of
-from . import parallel, preflight, results, scenes
+from .. import parallel
+from ..errors import Diverged, ParameterError
+from ..input import numerics as numerics_of
+from ..input import scenes
+from ..output import results
+from ..schemes import scheme_class
+from ..schemes.stepping import AdaptiveSteps, FixedSteps, march, time_grid
+from ..values import closest_name
+from . import preflight
 from . import restart as restarts
-from .errors import Diverged, ParameterError
-from .schemes import scheme_class
-from .schemes.stepping import AdaptiveSteps, FixedSteps, march, time_grid
 from .threads import blas_single_threaded, task_manager
-from .values import closest_name
 
 #: Above this many steps only about MAX_RECORDS steps are recorded (evenly), unless asked otherwise.
 MAX_RECORDS = 2000
@@ -36,7 +39,7 @@ __all__ = ["run", "time_grid", "MAX_RECORDS"]
 
 def run(scene=None, *, restart=None, checkpoint=None, progress=None, record_times=None, times=None, limit=None,
         threads=None, model=None, **overrides):
-    """Run a scene and return its Dataset (see :mod:`workbench.results` for the schema).
+    """Run a scene and return its Dataset (see :mod:`workbench.output.results` for the schema).
 
     Parameters
     ----------
@@ -45,7 +48,7 @@ def run(scene=None, *, restart=None, checkpoint=None, progress=None, record_time
         may be left out (the archive's scene, with ``overrides``).
     restart : path, optional
         Continue the run archived there (or its last checkpoint) from its last time to T
-        (:mod:`workbench.restart`): the result, old records and new, equals the run straight to
+        (:mod:`workbench.running.restart`): the result, old records and new, equals the run straight to
         T. Only T (>= the archive's time) and the output options may differ from the archive's
         values; anything else is refused, listing the differences, before any work.
     checkpoint : path, optional
@@ -68,9 +71,9 @@ def run(scene=None, *, restart=None, checkpoint=None, progress=None, record_time
         the time loop inside NGSolve's TaskManager with this many threads (default:
         none; measured 1.1-1.9x on idle cores, slower on busy ones; memory_hertz3d at
         h_contact = 0.01: 19.7 -> 8.9 s with 2, equal to 1e-10 relative). BLAS stays
-        at one thread during a run (:mod:`workbench.threads`).
+        at one thread during a run (:mod:`workbench.running.threads`).
     model : ModelA or ModelB, optional
-        The physics to run instead of the scene's own (:func:`workbench.models.from_scene`), e.g.
+        The physics to run instead of the scene's own (:func:`workbench.input.models.from_scene`), e.g.
         with a law replaced; its terms are recorded in the ``terms`` attribute.
     **overrides
         Scene parameters (``k=0.005``, ``gamma_nu=1``, ...).
@@ -78,7 +81,7 @@ def run(scene=None, *, restart=None, checkpoint=None, progress=None, record_time
     Raises
     ------
     workbench.ParameterError
-        For any bad input, before work starts (:class:`workbench.restart.NoRestartState` for an
+        For any bad input, before work starts (:class:`workbench.running.restart.NoRestartState` for an
         archive that cannot be continued).
     workbench.Diverged
         When the state becomes non-finite or unbounded; ``err.dataset`` holds
@@ -117,7 +120,7 @@ def _check_options(overrides: dict, checkpoint, limit, threads) -> None:
             if hint:
                 raise ParameterError(f"unknown option {key!r} of workbench.run{hint}")
     if checkpoint is not None:
-        from .files import check_output
+        from ..output.files import check_output
 
         check_output(checkpoint, "checkpoint")
     if limit is not None and (isinstance(limit, bool) or not isinstance(limit, (int, float)) or not limit > 0):

@@ -16,7 +16,7 @@ recovered with one more solve, u = z - M^{-1} P f(u_C).
 Examples
 --------
 >>> import workbench
->>> from workbench import discretisation
+>>> from workbench.discrete import discretisation
 >>> d = discretisation.build(workbench.scene("slab", h=0.1, c_tau=1.0))
 >>> op = ContactOperator(d)
 >>> op.size  # 10 free contact vertices, both components (the glue acts tangentially)
@@ -27,9 +27,9 @@ from __future__ import annotations
 import numpy as np
 import scipy.linalg as la
 
+from ..errors import NewtonFailed
+from ..physics.ops import NP
 from .boundary import contact_dofs
-from .errors import NewtonFailed
-from .physics.ops import NP
 
 
 class ContactOperator:

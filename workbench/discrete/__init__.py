@@ -1,0 +1,3 @@
+"""Discretisation and solvers: a model on its mesh (spaces, constant matrices, the contact side), the linear solvers,
+the condensed contact system, the explicit scheme's step limit.
+"""

@@ -1,0 +1,2 @@
+"""Output: the result Dataset's schema and recording, netCDF archives written atomically, ParaView files.
+"""

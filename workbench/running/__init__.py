@@ -1,0 +1,3 @@
+"""Running: one run put together (scene -> model -> discretisation -> scheme -> Dataset), its restart, the checks
+before it, the thread pools.
+"""
