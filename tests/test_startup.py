@@ -75,4 +75,4 @@ def test_the_probe_operator_is_ngsolves_point_evaluation(scene, values):
     d = discretisation.build(make(scene, **values))
     d.u.vec.FV().NumPy()[:] = np.random.default_rng(3).standard_normal(d.ndof)
     ngsolve_values = np.asarray(d.u(d.probe_points)).reshape(len(d.scene["probes"]), d.dim)
-    np.testing.assert_allclose(d.probe_values(), ngsolve_values, rtol=1e-13, atol=1e-13)
+    np.testing.assert_allclose(d.fields.probe_values(), ngsolve_values, rtol=1e-13, atol=1e-13)

@@ -187,7 +187,7 @@ class Recorder:
             self.times.append(t)
             self.steps.append(self.step)
             u = d.u.vec.FV().NumPy()
-            self.u_probe.append(d.probe_values())
+            self.u_probe.append(d.fields.probe_values())
             self.u_contact.append(u[d.node_dofs])
             if d.beta is not None:
                 self.beta.append(d.beta.vec.FV().NumPy()[d.beta_dofs].copy())
@@ -239,9 +239,9 @@ class Recorder:
         from ..physics.kelvin_voigt import stress_and_von_mises
 
         d = self.disc
-        parts = [(tensor, d.cell_strains(vector)) for tensor, vector in self.observer.stress_parts()]
+        parts = [(tensor, d.fields.cell_strains(vector)) for tensor, vector in self.observer.stress_parts()]
         stress, vm = stress_and_von_mises(parts, d.dim)
-        edges = d.edge_values() if d.numerics.order > 1 else None
+        edges = d.fields.edge_values() if d.numerics.order > 1 else None
         self.snaps.append((t, d.u.vec.FV().NumPy().copy(), stress, vm, edges))
 
     def dataset(self, attrs: dict) -> xr.Dataset:
@@ -291,7 +291,7 @@ class Recorder:
             vxyz = d.vertex_xyz
             for c in range(dim):
                 coords[f"vertex_{COMPONENTS[c]}"] = _var("vertex", vxyz[:, c], f"vertex_{COMPONENTS[c]}")
-            data["cell_vertices"] = _var(("cell", "corner"), d.cells, "cell_vertices")
+            data["cell_vertices"] = _var(("cell", "corner"), d.fields.cells, "cell_vertices")
             data["mesh"] = ugrid_topology(dim, data["cell_vertices"])
             if dim == 3:
                 data["mesh_volume_shape"] = xr.Variable(("cell",), np.zeros(len(data["cell_vertices"]), np.int8), attrs={
@@ -305,7 +305,7 @@ class Recorder:
                                   np.stack([s[2] for s in self.snaps]), "stress")
             data["von_mises"] = _var(("snapshot", "cell"), np.stack([s[3] for s in self.snaps]), "von_mises")
             if self.snaps[0][4] is not None:  # order >= 2: the field at the edge midpoints too
-                data["edge_vertices"] = _var(("edge", "end"), d.edges[0], "edge_vertices")
+                data["edge_vertices"] = _var(("edge", "end"), d.fields.edges[0], "edge_vertices")
                 data["u_edges"] = _var(("snapshot", "edge", "component"), np.stack([s[4] for s in self.snaps]),
                                        "u_edges")
         if "mesh" in data:  # the fields on the mesh say where they live (UGRID)

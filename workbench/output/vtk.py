@@ -198,7 +198,6 @@ def export(ds, folder, stem=None) -> list[Path]:
         points = np.concatenate([points, points[edges].mean(axis=1)])
         cells = _quadratic(ds, cells)
     cell_type = CELL_TYPE[dim][int(quadratic)]
-    stress_names = [str(s) for s in ds.stress_component.values]
     facets = contact_facets(ds)
     used = np.unique(facets)
     renumber = np.full(ds.sizes["vertex"], -1, dtype=np.int64)

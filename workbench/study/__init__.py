@@ -27,7 +27,6 @@ import xarray as xr
 from ..errors import ParameterError
 from ..input import numerics, scenes
 from ..output import results
-from ..output.results import attr_value
 from . import evaluate, execute, reference
 from .cases import BASE_AXES, Case, canonical, expand, extension, fingerprint, inputs, positive_int, read_case
 from .evaluate import fit_order
@@ -105,8 +104,8 @@ class Study:
         self.reference = reference_obj = _reference(reference, self)
         self.listed = [c for c in self.cases if reference_obj is None or reference_obj.reported(c)]
         if reference_obj is not None and not self.listed:
-            raise ParameterError(f"reference = 'finest' with a single case leaves nothing to compare: sweep at least two "
-                                 f"values (e.g. k=[0.02, 0.01]) or give a reference run or solution")
+            raise ParameterError("reference = 'finest' with a single case leaves nothing to compare: sweep at least two "
+                                 "values (e.g. k=[0.02, 0.01]) or give a reference run or solution")
         self.layout = evaluate.Layout(self.cases, self.axes, self.coupled)
         self._scenes = {}
         self.dataset = None
@@ -225,7 +224,7 @@ class Study:
         finally:
             bar.close()
         executed = time.perf_counter() - t0
-        self.dataset = self._evaluate(runs, compare)
+        self.dataset = evaluate.study_dataset(self, runs, compare, _history(self))
         case_cost = float(np.nansum(self.dataset["wall_time"]) + np.nansum(self.dataset["setup_time"]))
         self.overhead = dict(execute=executed, cases=case_cost, new_cases=len(missing) - len(plans),
                              extended_cases=len(plans), evaluate=time.perf_counter() - t0 - executed)
@@ -234,62 +233,6 @@ class Study:
     def _cost_estimate(self, case):
         sc = self.scene_of(case)
         return float(sc.body.n_cells()) * case.order ** sc.dim / case.k
-
-    # -- evaluation ------------------------------------------------------------------------------------
-    def _evaluate(self, runs, compare) -> xr.Dataset:
-        ref = self.reference
-        rows, methods = {}, set()
-        ref_measures = {}
-        for case in self.listed:
-            ds = runs[case]
-            a = ds.attrs
-            row = {n: a.get(n, np.nan) for n in evaluate.COSTS}
-            row |= {"ndof": a["ndof"], "nsteps": a["nsteps"], "complete": int(a["status"] == "complete"),
-                    "status": a["status"] if not a.get("failure_type") or a["status"] == "refused"
-                    else f"{a['status']} ({a['failure_type']})"}
-            if ref is not None and a["status"] == "complete":
-                err = ref.errors(case, self.scene_of(case, compare), ds, runs, compare,
-                                 lambda c: self.scene_of(c, compare))
-                methods.add(err.pop("transfer", "same mesh / exact solution"))
-                row |= err
-            if self.measures is not None:
-                values = {n: float(v) for n, v in self.measures(ds).items()}
-                row |= values
-                if ref is not None and ref.kind == "run":
-                    rc = ref.of(case)
-                    if rc not in ref_measures:
-                        ref_measures[rc] = {n: float(v) for n, v in self.measures(runs[rc]).items()}
-                    for n, v in values.items():
-                        r = ref_measures[rc][n]
-                        row[f"rel_error_{n}"] = abs(v - r) / abs(r) if r != 0 else np.nan
-            rows[case] = row
-        # the probes from the case's scene, not its run: a refused case has no Dataset to read them from
-        dim = self.scene.dim
-        probes = np.asarray(self.scene_of(self.listed[0])["probes"], dtype=float).reshape(-1, dim)
-        probe_coords = {f"probe_{c}": ("probe", probes[:, i]) for i, c in enumerate(("x", "y", "z")[:dim])}
-        ds = evaluate.dataset(self.layout, rows, len(probes), probe_coords, dim)
-        ds["compare_time"] = ("compare", np.asarray(compare), {"units": "s",
-                                                               "long_name": "times at which fields are compared"})
-        for name in ds.coords:
-            if name in ("h", "k"):
-                ds[name].attrs.update(units="s" if name == "k" else "m",
-                                      long_name="time step" if name == "k" else "target element size")
-        swept = set(self.axes) | set(self.coupled)
-        ref_case = self.ref_case
-        ds.attrs = {
-            "Conventions": "CF-1.10", "title": f"workbench study of scene {self.scene.name}",
-            "scene": self.scene.name, "geometry": self.scene.geometry, "model": self.scene.model,
-            "reference": ref.describe() if ref is not None else "none",
-            "reference_case": ref_case.key if ref_case is not None else "",
-            "transfer": "; ".join(sorted(methods)) or "same mesh / exact solution",
-            "coupling": ("k = k_over_h * h" if self.coupled == ("k",) else ", ".join(self.coupled)) if self.coupled
-            else "product of the axes" + (" (union of grids)" if not ds.ran.all() else ""),
-            "axes": ",".join(self.axes),
-            "parameters_json": canonical(self.scene.plain()),
-            "cases_total_wall_time": float(np.nansum(ds["wall_time"]) + np.nansum(ds["setup_time"])),
-            "history": _history(self),
-        } | {k: attr_value(v) for k, v in self.scene.values.items() if k not in swept}
-        return ds
 
     # -- questions ---------------------------------------------------------------------------------------
     def assert_order(self, expected: float, tol: float = 0.1, *, norm: str = "error", along: str | None = None,

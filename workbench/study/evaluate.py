@@ -20,6 +20,8 @@ import numpy as np
 import xarray as xr
 
 from ..input.numerics import REFINEMENT
+from ..output.results import attr_value
+from .cases import canonical
 
 NORMS = ("error", "error_V", "error_Q", "error_beta", "error_beta_end")
 COSTS = ("wall_time", "cpu_time", "setup_time", "memory_peak_mb", "h_max")
@@ -251,3 +253,63 @@ def fit_order(x, y):
         return float((ly[1] - ly[0]) / (lx[1] - lx[0])), np.nan
     coef, cov = np.polyfit(lx, ly, 1, cov=True)
     return float(coef[0]), float(np.sqrt(cov[0, 0]))
+
+
+def study_dataset(study, runs: dict, compare, history: str) -> xr.Dataset:
+    """The study's Dataset of its cases' runs (``runs``: case -> Dataset): per case its cost, status, errors against
+    the reference at the comparison times ``compare`` and measures, laid out on the study's axes, with the fitted
+    orders and the Pareto front (:func:`dataset`), and attributes that say how it was made (``history``: the
+    call)."""
+    ref = study.reference
+    rows, methods = {}, set()
+    ref_measures = {}
+    for case in study.listed:
+        ds = runs[case]
+        a = ds.attrs
+        row = {n: a.get(n, np.nan) for n in COSTS}
+        row |= {"ndof": a["ndof"], "nsteps": a["nsteps"], "complete": int(a["status"] == "complete"),
+                "status": a["status"] if not a.get("failure_type") or a["status"] == "refused"
+                else f"{a['status']} ({a['failure_type']})"}
+        if ref is not None and a["status"] == "complete":
+            err = ref.errors(case, study.scene_of(case, compare), ds, runs, compare,
+                             lambda c: study.scene_of(c, compare))
+            methods.add(err.pop("transfer", "same mesh / exact solution"))
+            row |= err
+        if study.measures is not None:
+            values = {n: float(v) for n, v in study.measures(ds).items()}
+            row |= values
+            if ref is not None and ref.kind == "run":
+                rc = ref.of(case)
+                if rc not in ref_measures:
+                    ref_measures[rc] = {n: float(v) for n, v in study.measures(runs[rc]).items()}
+                for n, v in values.items():
+                    r = ref_measures[rc][n]
+                    row[f"rel_error_{n}"] = abs(v - r) / abs(r) if r != 0 else np.nan
+        rows[case] = row
+    # the probes from the case's scene, not its run: a refused case has no Dataset to read them from
+    dim = study.scene.dim
+    probes = np.asarray(study.scene_of(study.listed[0])["probes"], dtype=float).reshape(-1, dim)
+    probe_coords = {f"probe_{c}": ("probe", probes[:, i]) for i, c in enumerate(("x", "y", "z")[:dim])}
+    ds = dataset(study.layout, rows, len(probes), probe_coords, dim)
+    ds["compare_time"] = ("compare", np.asarray(compare), {"units": "s",
+                                                           "long_name": "times at which fields are compared"})
+    for name in ds.coords:
+        if name in ("h", "k"):
+            ds[name].attrs.update(units="s" if name == "k" else "m",
+                                  long_name="time step" if name == "k" else "target element size")
+    swept = set(study.axes) | set(study.coupled)
+    ref_case = study.ref_case
+    ds.attrs = {
+        "Conventions": "CF-1.10", "title": f"workbench study of scene {study.scene.name}",
+        "scene": study.scene.name, "geometry": study.scene.geometry, "model": study.scene.model,
+        "reference": ref.describe() if ref is not None else "none",
+        "reference_case": ref_case.key if ref_case is not None else "",
+        "transfer": "; ".join(sorted(methods)) or "same mesh / exact solution",
+        "coupling": ("k = k_over_h * h" if study.coupled == ("k",) else ", ".join(study.coupled)) if study.coupled
+        else "product of the axes" + (" (union of grids)" if not ds.ran.all() else ""),
+        "axes": ",".join(study.axes),
+        "parameters_json": canonical(study.scene.plain()),
+        "cases_total_wall_time": float(np.nansum(ds["wall_time"]) + np.nansum(ds["setup_time"])),
+        "history": history,
+    } | {k: attr_value(v) for k, v in study.scene.values.items() if k not in swept}
+    return ds
