@@ -47,14 +47,12 @@ def run(scene=None, *, restart=None, checkpoint=None, progress=None, record_time
         Built-in name (``workbench scenes`` lists them), TOML file or Scene. With ``restart`` it
         may be left out (the archive's scene, with ``overrides``).
     restart : path, optional
-        Continue the run archived there (or its last checkpoint) from its last time to T
-        (:mod:`workbench.running.restart`): the result, old records and new, equals the run straight to
-        T. Only T (>= the archive's time) and the output options may differ from the archive's
-        values; anything else is refused, listing the differences, before any work.
+        Continue the run archived there (or its last checkpoint) to T (:mod:`workbench.running.restart`):
+        the result equals the run straight to T. Only T and the output options may differ from the
+        archive's values (anything else is refused before any work, with the differences).
     checkpoint : path, optional
         Where to write the archive so far (records and restart state, atomically) every
-        ``checkpoint_every`` accepted steps; the final result is returned, not written there
-        (the command line's ``-o`` writes it to the same file).
+        ``checkpoint_every`` accepted steps (the command line's ``-o``).
     progress : bool, optional
         Show a progress bar (default: only on a terminal).
     record_times : sequence of float, optional
@@ -67,11 +65,8 @@ def run(scene=None, *, restart=None, checkpoint=None, progress=None, record_time
         Displacement (max over dofs) beyond which the run is stopped as diverged
         (default: 10 x the body's largest extent).
     threads : int, optional
-        Run the setup (assembly, factorisations, Model B's condensed contact system) and
-        the time loop inside NGSolve's TaskManager with this many threads (default:
-        none; measured 1.1-1.9x on idle cores, slower on busy ones; memory_hertz3d at
-        h_contact = 0.01: 19.7 -> 8.9 s with 2, equal to 1e-10 relative). BLAS stays
-        at one thread during a run (:mod:`workbench.running.threads`).
+        Run the setup and the time loop inside NGSolve's TaskManager with this many threads
+        (default: none; 1.1-1.9x faster on idle cores, slower on busy ones: docs/conventions.md).
     model : ModelA or ModelB, optional
         The physics to run instead of the scene's own (:func:`workbench.input.models.from_scene`), e.g.
         with a law replaced; its terms are recorded in the ``terms`` attribute.
@@ -93,13 +88,7 @@ def run(scene=None, *, restart=None, checkpoint=None, progress=None, record_time
         raise ParameterError(f"checkpoint_every = {sc['checkpoint_every']} needs a file to write the checkpoints to: "
                              "give -o OUT.nc (workbench.run: checkpoint=PATH)")
     numerics = numerics_of.from_scene(sc, threads)
-    sync = tuple(sc["snapshots"]) + (tuple(record_times) if record_times is not None else ())
-    try:
-        grid = time_grid(sc["T"], sc["k"], times, sync=sync)
-    except ValueError as err:
-        raise ParameterError(str(err)) from None
-    if resume is not None and not numerics.adaptive:
-        restarts.check_grid(restart, grid, resume.state, resume.archive)
+    grid, sync = _grid(sc, numerics, times, record_times, resume)
     model = model or sc.model_of()
     world = parallel.world()
     parallel.check(sc, model, numerics)
@@ -127,6 +116,18 @@ def _check_options(overrides: dict, checkpoint, limit, threads) -> None:
         raise ParameterError(f"limit = {limit!r}: give the displacement bound in m, a number > 0")
     if threads is not None and (isinstance(threads, bool) or not isinstance(threads, int) or threads < 1):
         raise ParameterError(f"threads = {threads!r}: give an integer >= 1 (NGSolve TaskManager threads)")
+
+
+def _grid(sc, numerics, times, record_times, resume):
+    """(the fixed-step grid, the times it must contain); a continued run's must start with the archive's."""
+    sync = tuple(sc["snapshots"]) + (tuple(record_times) if record_times is not None else ())
+    try:
+        grid = time_grid(sc["T"], sc["k"], times, sync=sync)
+    except ValueError as err:
+        raise ParameterError(str(err)) from None
+    if resume is not None and not numerics.adaptive:
+        restarts.check_grid(resume.path, grid, resume.state, resume.archive)
+    return grid, sync
 
 
 class _Resume:

@@ -168,41 +168,47 @@ class ImplicitEuler(ErrorControlled, KelvinVoigtScheme):
             self.z[d.dirichlet_dofs] = d.dirichlet_value(t_next) - u[d.dirichlet_dofs]
         self.iterations = self.passes = 0
         if self.newton is not None:
-            C = self.op.C
-            z_C = u[C] + self.z[C]
-            # initial guess: linear extrapolation of the contact displacement (often the right active set)
-            if len(self.history) >= 2:
-                u_C_prev, k_prev = self.history[-2][1][C], self.history[-1][0] - self.history[-2][0]
-                u_C = u[C] + (k / k_prev) * (u[C] - u_C_prev)
-            else:
-                u_C = u[C].copy()
-            beta = d.beta.vec.FV().NumPy() if d.beta is not None else None
-            beta_old = beta[d.beta_dofs].copy() if beta is not None else None
-            passes = self.max_passes
-            if beta is not None and self.resolved:
-                self._predict_beta(k, beta_old)  # drops beta by at most e^-0.1 here
-                passes = 1
-            self.newton.iterations = 0
-            for self.passes in range(1, passes + 1):
-                f_C = self.newton.solve(u_C, z_C, t_next, d.scene.name)
-                if beta is None:
-                    break
-                u[C] = u_C  # the bonding update reads u on the contact side only
-                previous = beta[d.beta_dofs].copy()
-                self._update_beta(k, beta_old)
-                if np.abs(beta[d.beta_dofs] - previous).max() <= self.beta_tol:
-                    break
-            self.iterations = self.newton.iterations
-            correction = np.zeros(d.ndof)
-            correction[C] = f_C
-            out = np.zeros(d.ndof)
-            self.solver.solve(correction, out)
-            self.z -= out
+            self._contact(u, k, t_next)
         u[:] = self.u_prev + self.z
         if self.newton is None and self.bonding is not None:
             self._update_beta(k, d.beta.vec.FV().NumPy()[d.beta_dofs].copy())
         d.v.vec.FV().NumPy()[:] = self._velocity(self.z, a0, w)
         self.k_last = k
+
+    def _contact(self, u: np.ndarray, k: float, t_next: float) -> None:
+        """The contact forces of the step by the condensed semismooth Newton, coupled with beta_n (the passes of the
+        module docs), taken off the contact-free increment ``self.z``; ``u`` holds u_{n-1} (its contact dofs the
+        solution, for the bonding update)."""
+        d, C = self.d, self.op.C
+        z_C = u[C] + self.z[C]
+        # initial guess: linear extrapolation of the contact displacement (often the right active set)
+        if len(self.history) >= 2:
+            u_C_prev, k_prev = self.history[-2][1][C], self.history[-1][0] - self.history[-2][0]
+            u_C = u[C] + (k / k_prev) * (u[C] - u_C_prev)
+        else:
+            u_C = u[C].copy()
+        beta = d.beta.vec.FV().NumPy() if d.beta is not None else None
+        beta_old = beta[d.beta_dofs].copy() if beta is not None else None
+        passes = self.max_passes
+        if beta is not None and self.resolved:
+            self._predict_beta(k, beta_old)  # drops beta by at most e^-0.1 here
+            passes = 1
+        self.newton.iterations = 0
+        for self.passes in range(1, passes + 1):
+            f_C = self.newton.solve(u_C, z_C, t_next, d.scene.name)
+            if beta is None:
+                break
+            u[C] = u_C  # the bonding update reads u on the contact side only
+            previous = beta[d.beta_dofs].copy()
+            self._update_beta(k, beta_old)
+            if np.abs(beta[d.beta_dofs] - previous).max() <= self.beta_tol:
+                break
+        self.iterations = self.newton.iterations
+        correction = np.zeros(d.ndof)
+        correction[C] = f_C
+        out = np.zeros(d.ndof)
+        self.solver.solve(correction, out)
+        self.z -= out
 
     # -- the bonding field --------------------------------------------------------------------------------------
     def _r2(self, u):

@@ -184,25 +184,7 @@ class Study:
         archive = Path(archive) if archive is not None else Path(tempfile.mkdtemp(prefix="workbench-study-"))
         archive.mkdir(parents=True, exist_ok=True)
         todo = list(dict.fromkeys(self.listed + (self.reference.cases() if self.reference else [])))
-        runs, missing, expected, plans = {}, [], {}, {}
-        for case in todo:
-            expected[case] = inputs(self.scene_of(case, compare), self._record_times(case, record, compare), compare)
-            path = archive / f"{case.key}.nc"
-            ds, reason = read_case(path, expected[case])
-            if ds is not None:
-                runs[case] = ds
-                continue
-            if reason and extend:
-                plan, why = extension(path, expected[case])
-                if plan is not None:
-                    plans[case] = plan
-                    missing.append(case)
-                    continue
-                reason = f"{reason} ({why})" if why else reason
-            if reason:
-                warnings.warn(f"study case {path}: {reason}; recomputing it", RuntimeWarning, stacklevel=2)
-            missing.append(case)
-        missing.sort(key=self._cost_estimate, reverse=True)  # biggest first, so the pool ends evenly
+        runs, missing, expected, plans = self._archived(todo, archive, record, compare, extend)
         tasks = [(c, (self.scene, c.values(), self._record_times(c, record, compare), list(compare),
                       {"case_inputs": canonical(expected[c]), "case_fingerprint": fingerprint(expected[c])},
                       plans.get(c)))
@@ -229,6 +211,30 @@ class Study:
         self.overhead = dict(execute=executed, cases=case_cost, new_cases=len(missing) - len(plans),
                              extended_cases=len(plans), evaluate=time.perf_counter() - t0 - executed)
         return self.dataset
+
+    def _archived(self, todo, archive: Path, record, compare, extend: bool):
+        """(the runs archived for these inputs, the cases to run (biggest first, so the pool ends evenly), every
+        case's inputs, the plans of the cases that continue an archived run to a longer T)."""
+        runs, missing, expected, plans = {}, [], {}, {}
+        for case in todo:
+            expected[case] = inputs(self.scene_of(case, compare), self._record_times(case, record, compare), compare)
+            path = archive / f"{case.key}.nc"
+            ds, reason = read_case(path, expected[case])
+            if ds is not None:
+                runs[case] = ds
+                continue
+            if reason and extend:
+                plan, why = extension(path, expected[case])
+                if plan is not None:
+                    plans[case] = plan
+                    missing.append(case)
+                    continue
+                reason = f"{reason} ({why})" if why else reason
+            if reason:
+                warnings.warn(f"study case {path}: {reason}; recomputing it", RuntimeWarning, stacklevel=3)
+            missing.append(case)
+        missing.sort(key=self._cost_estimate, reverse=True)
+        return runs, missing, expected, plans
 
     def _cost_estimate(self, case):
         sc = self.scene_of(case)
