@@ -244,37 +244,7 @@ def parse(text, *, name: str = "", allowed=VARIABLES, size: int | None = None) -
     ExpressionError
         On any syntax outside the grammar, an unknown name, or a wrong size.
     """
-    if isinstance(text, Expression):
-        expr = text
-    else:
-        if isinstance(text, (list, tuple)):
-            source = "(" + ", ".join(str(_as_text(v, name)) for v in text) + ")"
-        else:
-            source = str(_as_text(text, name))
-        src = source.replace("^", "**").strip()
-        if not src:
-            raise ExpressionError(f"{name or 'expression'} is empty")
-        if len(src) > MAX_LENGTH:
-            raise ExpressionError(f"{name} = {_shown(source)} is {len(src)} characters long; at most {MAX_LENGTH} "
-                                  "are allowed")
-        if src.count("(") > MAX_DEPTH * 4:
-            raise ExpressionError(f"in {name} = {_shown(source)}: too many parentheses (nesting is limited to "
-                                  f"{MAX_DEPTH} levels)")
-        try:
-            tree = ast.parse(src, mode="eval").body
-        except SyntaxError as err:
-            raise ExpressionError(f"in {name} = {_shown(source)}: syntax error ({err.msg})") from None
-        except (RecursionError, MemoryError):
-            raise ExpressionError(f"in {name} = {_shown(source)}: nested too deeply (at most {MAX_DEPTH} "
-                                  "levels)") from None
-        terms = tuple(tree.elts) if isinstance(tree, ast.Tuple) else (tree,)
-        if not terms:
-            raise ExpressionError(f"in {name} = {_shown(source)}: empty tuple")
-        for term in terms:
-            _check(term, source, name, allowed)
-        used = frozenset(n.id for term in terms for n in ast.walk(term)
-                         if isinstance(n, ast.Name) and n.id in VARIABLES)
-        expr = Expression(source, terms, used)
+    expr = text if isinstance(text, Expression) else _parse_source(_source(text, name), name, allowed)
     bad = [v for v in expr.variables if v not in allowed]
     if bad:
         raise ExpressionError(f"in {name} = {_shown(expr.source)}: {bad[0]!r} not allowed here (allowed: "
@@ -286,6 +256,42 @@ def parse(text, *, name: str = "", allowed=VARIABLES, size: int | None = None) -
             f"{name} = {_shown(expr.source)} has {expr.size} component(s), {size} are needed"
             + (f", e.g. '({', '.join(['0'] * size)})'" if size > 1 else ""))
     return expr
+
+
+def _source(text, name) -> str:
+    """The text of an expression given as text, a number, or a tuple/list of them (a vector)."""
+    if isinstance(text, (list, tuple)):
+        return "(" + ", ".join(str(_as_text(v, name)) for v in text) + ")"
+    return str(_as_text(text, name))
+
+
+def _parse_source(source, name, allowed) -> Expression:
+    """The :class:`Expression` of ``source``: parsed with :mod:`ast` (within the size and depth limits) and every
+    component checked against the grammar."""
+    src = source.replace("^", "**").strip()
+    if not src:
+        raise ExpressionError(f"{name or 'expression'} is empty")
+    if len(src) > MAX_LENGTH:
+        raise ExpressionError(f"{name} = {_shown(source)} is {len(src)} characters long; at most {MAX_LENGTH} "
+                              "are allowed")
+    if src.count("(") > MAX_DEPTH * 4:
+        raise ExpressionError(f"in {name} = {_shown(source)}: too many parentheses (nesting is limited to "
+                              f"{MAX_DEPTH} levels)")
+    try:
+        tree = ast.parse(src, mode="eval").body
+    except SyntaxError as err:
+        raise ExpressionError(f"in {name} = {_shown(source)}: syntax error ({err.msg})") from None
+    except (RecursionError, MemoryError):
+        raise ExpressionError(f"in {name} = {_shown(source)}: nested too deeply (at most {MAX_DEPTH} "
+                              "levels)") from None
+    terms = tuple(tree.elts) if isinstance(tree, ast.Tuple) else (tree,)
+    if not terms:
+        raise ExpressionError(f"in {name} = {_shown(source)}: empty tuple")
+    for term in terms:
+        _check(term, source, name, allowed)
+    used = frozenset(n.id for term in terms for n in ast.walk(term)
+                     if isinstance(n, ast.Name) and n.id in VARIABLES)
+    return Expression(source, terms, used)
 
 
 def _as_text(value, name):

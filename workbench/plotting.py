@@ -63,14 +63,7 @@ def overview(ds, path=None):
     """
     comp = ds.component.values[-1]  # vertical (normal) component in 2D/3D, x in 1D
     model_b = "contact_state" in ds
-    along_side = ds.sizes.get("node", 0) > 1
-    panels = ["probes"]
-    if "beta" in ds:
-        panels.append("beta")
-    if model_b:
-        panels += ["pressure", "u_contact", "states"] if along_side else ["pressure_t"]
-    elif along_side:
-        panels.append("u_contact")
+    panels = _overview_panels(ds)
     fig, axes = figure(1, len(panels), figsize=(4.2 * len(panels), 3.4), squeeze=False)
     times = np.unique(np.quantile(ds.time.values, [0.25, 0.5, 0.75, 1.0], method="nearest"))
     order = np.argsort(ds.node_x.values)
@@ -100,27 +93,50 @@ def overview(ds, path=None):
             ax.set(xlabel="x [m]", ylabel="contact pressure [Pa]", title="contact pressure")
             ax.legend(fontsize=7)
         elif panel == "states":
-            st = ds.contact_state.values[:, order].astype(float)
-            st[st < 0] = np.nan
-            cmap = matplotlib.colors.ListedColormap(["#dddddd", "#4c72b0", "#55a868", "#c44e52"])
-            im = ax.pcolormesh(x_nodes, ds.time.values, st, cmap=cmap, vmin=-0.5, vmax=3.5, shading="nearest")
-            cb = fig.colorbar(im, ax=ax, ticks=[0, 1, 2, 3])
-            cb.ax.set_yticklabels(["separated", "stuck", "compliant", "rigid"], fontsize=7)
-            ax.set(xlabel="x [m]", ylabel="t [s]", title="contact states")
+            _states_panel(fig, ax, ds, x_nodes, order)
         elif panel == "pressure_t":
-            ax.plot(ds.time, ds.contact_pressure.isel(node=-1), color="k", lw=1)
-            states = ds.contact_state.isel(node=-1).values
-            for code, colour, name in ((1, "#4c72b0", "stuck"), (2, "#55a868", "compliant"), (3, "#c44e52", "rigid")):
-                on = states == code
-                if on.any():
-                    ax.fill_between(ds.time, 0, 1, where=on, color=colour, alpha=0.25, lw=0, label=name,
-                                    transform=ax.get_xaxis_transform())
-            ax.set(xlabel="t [s]", ylabel="contact pressure [Pa]", title="contact end: pressure and state")
-            ax.legend(fontsize=7)
+            _pressure_state_panel(ax, ds)
     status = "" if ds.attrs.get("status") == "complete" else "  [INCOMPLETE]"
     fig.suptitle(f"{plain(ds.attrs.get('scene'))}: scheme {ds.attrs.get('scheme')}, h = {ds.attrs.get('h_max'):.3g}, "
                  f"k = {ds.attrs.get('k_actual'):.3g}{status}", fontsize=9)
     return _save(fig, path)
+
+
+def _overview_panels(ds):
+    """The panels of :func:`overview` for this run: what its model records, along the contact side or at one end."""
+    along_side = ds.sizes.get("node", 0) > 1
+    panels = ["probes"]
+    if "beta" in ds:
+        panels.append("beta")
+    if "contact_state" in ds:
+        panels += ["pressure", "u_contact", "states"] if along_side else ["pressure_t"]
+    elif along_side:
+        panels.append("u_contact")
+    return panels
+
+
+def _states_panel(fig, ax, ds, x_nodes, order):
+    """The contact state of every node over time (Model B along a contact side), one colour per state."""
+    st = ds.contact_state.values[:, order].astype(float)
+    st[st < 0] = np.nan
+    cmap = matplotlib.colors.ListedColormap(["#dddddd", "#4c72b0", "#55a868", "#c44e52"])
+    im = ax.pcolormesh(x_nodes, ds.time.values, st, cmap=cmap, vmin=-0.5, vmax=3.5, shading="nearest")
+    cb = fig.colorbar(im, ax=ax, ticks=[0, 1, 2, 3])
+    cb.ax.set_yticklabels(["separated", "stuck", "compliant", "rigid"], fontsize=7)
+    ax.set(xlabel="x [m]", ylabel="t [s]", title="contact states")
+
+
+def _pressure_state_panel(ax, ds):
+    """The pressure at the contact end over time with its contact states shaded (Model B, the rod)."""
+    ax.plot(ds.time, ds.contact_pressure.isel(node=-1), color="k", lw=1)
+    states = ds.contact_state.isel(node=-1).values
+    for code, colour, name in ((1, "#4c72b0", "stuck"), (2, "#55a868", "compliant"), (3, "#c44e52", "rigid")):
+        on = states == code
+        if on.any():
+            ax.fill_between(ds.time, 0, 1, where=on, color=colour, alpha=0.25, lw=0, label=name,
+                            transform=ax.get_xaxis_transform())
+    ax.set(xlabel="t [s]", ylabel="contact pressure [Pa]", title="contact end: pressure and state")
+    ax.legend(fontsize=7)
 
 
 def _series(study_ds):

@@ -73,38 +73,9 @@ class Param:
         """Coerce ``value`` to this parameter's kind and check its range."""
         name = self.name
         if self.kind in ("float", "int"):
-            if isinstance(value, str):
-                try:
-                    value = float(value.strip())
-                except ValueError:
-                    raise ParameterError(f"{name} = {value!r} is not a number") from None
-            if isinstance(value, np.ndarray) and value.ndim == 0:  # (a NumPy scalar result)
-                value = value.item()
-            if isinstance(value, bool) or not isinstance(value, numbers.Real):
-                raise ParameterError(f"{name} = {value!r} is not a number")
-            value = float(value)
-            if not math.isfinite(value):
-                raise ParameterError(f"{name} = {value} is not finite; allowed: {self.range_text()}")
-            if self.kind == "int":
-                if value != int(value):
-                    raise ParameterError(f"{name} = {value} must be an integer; allowed: {self.range_text()}")
-                value = int(value)
-            lo, hi = self.lower, self.upper
-            bad_lo = lo is not None and (value <= lo if self.lower_open else value < lo)
-            bad_hi = hi is not None and (value >= hi if self.upper_open else value > hi)
-            if bad_lo or bad_hi:
-                raise ParameterError(f"{name} = {_fmt(value)} is outside the allowed range {self.range_text()}")
-            return value
+            return self._number(value)
         if self.kind == "flag":
-            if isinstance(value, str):
-                low = value.strip().lower()
-                if low in ("1", "true", "yes", "on"):
-                    return True
-                if low in ("0", "false", "no", "off"):
-                    return False
-            elif isinstance(value, (bool, int)) and value in (0, 1):
-                return bool(value)
-            raise ParameterError(f"{name} = {value!r} is not a flag; allowed: true | false")
+            return _flag(name, value)
         if self.kind == "choice":
             if value in self.choices:
                 return value
@@ -131,9 +102,49 @@ class Param:
             return _mapping(name, value)
         raise AssertionError(self.kind)
 
+    def _number(self, value):
+        """A float or int parameter's value: text and NumPy scalars read as numbers, then checked finite, integral
+        for an int, and within the bounds."""
+        name = self.name
+        if isinstance(value, str):
+            try:
+                value = float(value.strip())
+            except ValueError:
+                raise ParameterError(f"{name} = {value!r} is not a number") from None
+        if isinstance(value, np.ndarray) and value.ndim == 0:  # (a NumPy scalar result)
+            value = value.item()
+        if isinstance(value, bool) or not isinstance(value, numbers.Real):
+            raise ParameterError(f"{name} = {value!r} is not a number")
+        value = float(value)
+        if not math.isfinite(value):
+            raise ParameterError(f"{name} = {value} is not finite; allowed: {self.range_text()}")
+        if self.kind == "int":
+            if value != int(value):
+                raise ParameterError(f"{name} = {value} must be an integer; allowed: {self.range_text()}")
+            value = int(value)
+        lo, hi = self.lower, self.upper
+        bad_lo = lo is not None and (value <= lo if self.lower_open else value < lo)
+        bad_hi = hi is not None and (value >= hi if self.upper_open else value > hi)
+        if bad_lo or bad_hi:
+            raise ParameterError(f"{name} = {_fmt(value)} is outside the allowed range {self.range_text()}")
+        return value
+
 
 def _fmt(v) -> str:
     return f"{v:g}" if isinstance(v, float) else str(v)
+
+
+def _flag(name, value) -> bool:
+    """A flag's value: a bool, 0 or 1, or text such as true/false, yes/no, on/off."""
+    if isinstance(value, str):
+        low = value.strip().lower()
+        if low in ("1", "true", "yes", "on"):
+            return True
+        if low in ("0", "false", "no", "off"):
+            return False
+    elif isinstance(value, (bool, int)) and value in (0, 1):
+        return bool(value)
+    raise ParameterError(f"{name} = {value!r} is not a flag; allowed: true | false")
 
 
 def _points(name, value):

@@ -509,64 +509,89 @@ CONTACT_ZONE, ZONE_FACTOR = 0.3, 4.0
 def _indenter_mesh(kind, R, h, h_contact, contact_zone=CONTACT_ZONE):
     """The netgen mesh of a Hertz body (OCC), refined in the contact zone (``contact_zone`` R around the apex); made
     once per process and size while it is among the last few used."""
-    import math
-
-    from netgen.occ import ArcOfCircle, Box, Cylinder, Face, Glue, MoveTo, OCCGeometry, Pnt, Segment, Sphere, Wire, Z
-
-    tol, w = 1e-9 * R, contact_zone * R
-
-    def on_circle(c):
-        return abs(math.sqrt(c.x ** 2 + c.y ** 2 + c.z ** 2 - 2 * R * (c.y if kind == "halfdisc" else c.z) + R * R)
-                   - R) < 0.1 * R
+    from netgen.occ import OCCGeometry
 
     if kind == "halfdisc":
-        phi = math.asin(contact_zone)
-        arc = lambda a: Pnt(R * math.sin(a), R - R * math.cos(a), 0.0)  # noqa: E731 (the angle from the apex)
-        apex, corner, centre = Pnt(0.0, 0.0, 0.0), Pnt(R, R, 0.0), Pnt(0.0, R, 0.0)
-        body = Face(Wire([ArcOfCircle(apex, arc(phi / 2), arc(phi)),
-                          ArcOfCircle(arc(phi), arc((phi + math.pi / 2) / 2), corner),
-                          Segment(corner, centre), Segment(centre, apex)]))
-        zone = MoveTo(0.0, 0.0).Rectangle(w, w / 2).Face()
-        shape = Glue([body * zone, body - zone])
-        for f in shape.faces:
-            if f.center.y < w / 2 and f.center.x < w:
-                f.maxh = ZONE_FACTOR * h_contact
-        for e in shape.edges:
-            c = e.center
-            e.name = "axis" if abs(c.x) < tol else "top" if abs(c.y - R) < tol else "curved" if on_circle(c) \
-                else "interface"  # (between the zone and the rest: not a boundary of the body)
-            if e.name == "curved":
-                if c.x < w:
-                    e.maxh = h_contact
-                else:
-                    e.name = "flank"
+        shape = _halfdisc_shape(R, h_contact, contact_zone)
     else:
-        quarter = Sphere(Pnt(0.0, 0.0, R), R) * Box(Pnt(0.0, 0.0, 0.0), Pnt(R, R, R))
-        zone = Cylinder(Pnt(0.0, 0.0, 0.0), Z, r=w, h=w / 2)
-        shape = Glue([quarter * zone, quarter - zone])
-        for solid in shape.solids:
-            if solid.center.z < w / 2:
-                solid.maxh = ZONE_FACTOR * h_contact
-        for f in shape.faces:
-            c = f.center
-            if abs(c.x) < tol:
-                f.name = "symx"
-            elif abs(c.y) < tol:
-                f.name = "symy"
-            elif abs(c.z - R) < tol:
-                f.name = "top"
-            elif on_circle(c) and math.hypot(c.x, c.y) < w:
-                f.name, f.maxh = "curved", h_contact
-            elif on_circle(c):
-                f.name = "flank"
-            else:
-                f.name = "interface"
+        shape = _quarter_ball_shape(R, h_contact, contact_zone)
+    tol = 1e-9 * R
     for v in shape.vertices:
         p = v.p
         if abs(p.x) < tol and abs(p.y) < tol and abs(p.z) < tol:
             v.name = "apex"
     geo = OCCGeometry(shape, dim=2) if kind == "halfdisc" else OCCGeometry(shape)
     return geo.GenerateMesh(maxh=h, grading=0.25)
+
+
+def _on_circle(c, kind, R):
+    """Whether the point ``c`` lies on the indenter's curved side (the circle or sphere of radius R about the centre
+    R above the apex), loosely: it tells the curved edges or faces from the flat ones."""
+    import math
+
+    return abs(math.sqrt(c.x ** 2 + c.y ** 2 + c.z ** 2 - 2 * R * (c.y if kind == "halfdisc" else c.z) + R * R)
+               - R) < 0.1 * R
+
+
+def _halfdisc_shape(R, h_contact, contact_zone):
+    """The OCC half-disc of the 2D Hertz body, its contact zone glued in with finer maxh, its edges named."""
+    import math
+
+    from netgen.occ import ArcOfCircle, Face, Glue, MoveTo, Pnt, Segment, Wire
+
+    tol, w = 1e-9 * R, contact_zone * R
+    phi = math.asin(contact_zone)
+    arc = lambda a: Pnt(R * math.sin(a), R - R * math.cos(a), 0.0)  # noqa: E731 (the angle from the apex)
+    apex, corner, centre = Pnt(0.0, 0.0, 0.0), Pnt(R, R, 0.0), Pnt(0.0, R, 0.0)
+    body = Face(Wire([ArcOfCircle(apex, arc(phi / 2), arc(phi)),
+                      ArcOfCircle(arc(phi), arc((phi + math.pi / 2) / 2), corner),
+                      Segment(corner, centre), Segment(centre, apex)]))
+    zone = MoveTo(0.0, 0.0).Rectangle(w, w / 2).Face()
+    shape = Glue([body * zone, body - zone])
+    for f in shape.faces:
+        if f.center.y < w / 2 and f.center.x < w:
+            f.maxh = ZONE_FACTOR * h_contact
+    for e in shape.edges:
+        c = e.center
+        e.name = "axis" if abs(c.x) < tol else "top" if abs(c.y - R) < tol \
+            else "curved" if _on_circle(c, "halfdisc", R) \
+            else "interface"  # (between the zone and the rest: not a boundary of the body)
+        if e.name == "curved":
+            if c.x < w:
+                e.maxh = h_contact
+            else:
+                e.name = "flank"
+    return shape
+
+
+def _quarter_ball_shape(R, h_contact, contact_zone):
+    """The OCC quarter ball of the 3D Hertz body, its contact zone glued in with finer maxh, its faces named."""
+    import math
+
+    from netgen.occ import Box, Cylinder, Glue, Pnt, Sphere, Z
+
+    tol, w = 1e-9 * R, contact_zone * R
+    quarter = Sphere(Pnt(0.0, 0.0, R), R) * Box(Pnt(0.0, 0.0, 0.0), Pnt(R, R, R))
+    zone = Cylinder(Pnt(0.0, 0.0, 0.0), Z, r=w, h=w / 2)
+    shape = Glue([quarter * zone, quarter - zone])
+    for solid in shape.solids:
+        if solid.center.z < w / 2:
+            solid.maxh = ZONE_FACTOR * h_contact
+    for f in shape.faces:
+        c = f.center
+        if abs(c.x) < tol:
+            f.name = "symx"
+        elif abs(c.y) < tol:
+            f.name = "symy"
+        elif abs(c.z - R) < tol:
+            f.name = "top"
+        elif _on_circle(c, "hemisphere", R) and math.hypot(c.x, c.y) < w:
+            f.name, f.maxh = "curved", h_contact
+        elif _on_circle(c, "hemisphere", R):
+            f.name = "flank"
+        else:
+            f.name = "interface"
+    return shape
 
 
 #: The built-in geometries by name.

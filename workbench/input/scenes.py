@@ -471,21 +471,7 @@ def from_toml(path, overrides: dict | None = None) -> Scene:
     parameters or boundaries are errors, and so is a load given in both tables.
     """
     path = Path(path)
-    label = str(path)
-    try:
-        raw = path.read_bytes()
-    except FileNotFoundError:
-        raise ParameterError(f"scene file {label!r} not found") from None
-    except IsADirectoryError:
-        raise ParameterError(f"scene file {label!r} is a directory, not a TOML file") from None
-    except OSError as err:
-        raise ParameterError(f"scene file {label!r} cannot be read: {err.strerror}") from None
-    try:
-        data = tomllib.loads(raw.decode("utf-8"))
-    except UnicodeDecodeError:
-        raise ParameterError(f"scene file {label!r} is not a text (UTF-8 TOML) file") from None
-    except tomllib.TOMLDecodeError as err:
-        raise ParameterError(f"scene file {label!r}: {err}") from None
+    data = _read_toml(path)
     for key in data:
         if key not in _TOML_KEYS:
             raise ParameterError(f"{path.name}: unknown top-level key {key!r}; allowed: {', '.join(sorted(_TOML_KEYS))}"
@@ -511,6 +497,36 @@ def from_toml(path, overrides: dict | None = None) -> Scene:
     for key in ("name", "description"):
         if key in data and not isinstance(data[key], str):
             raise ParameterError(f"{path.name}: {key} must be text, got {data[key]!r}")
+    values = _toml_values(path, data, base) | dict(overrides or {})
+    name = data.get("name", path.stem)
+    try:
+        return make(name, values, base=base, description=data.get("description", ""), source=str(path.resolve()))
+    except ParameterError as err:
+        raise ParameterError(f"{path.name}: {err}") from None
+
+
+def _read_toml(path: Path) -> dict:
+    """The table of a scene file; a file that is missing, unreadable or not TOML is a ParameterError naming it."""
+    label = str(path)
+    try:
+        raw = path.read_bytes()
+    except FileNotFoundError:
+        raise ParameterError(f"scene file {label!r} not found") from None
+    except IsADirectoryError:
+        raise ParameterError(f"scene file {label!r} is a directory, not a TOML file") from None
+    except OSError as err:
+        raise ParameterError(f"scene file {label!r} cannot be read: {err.strerror}") from None
+    try:
+        return tomllib.loads(raw.decode("utf-8"))
+    except UnicodeDecodeError:
+        raise ParameterError(f"scene file {label!r} is not a text (UTF-8 TOML) file") from None
+    except tomllib.TOMLDecodeError as err:
+        raise ParameterError(f"scene file {label!r}: {err}") from None
+
+
+def _toml_values(path: Path, data: dict, base: str) -> dict:
+    """The parameter values of a scene file: its [parameters], with each [traction] entry as ``traction_{side}``
+    (a side the base scene cannot load, or a load given in both tables, is an error)."""
     values = dict(data.get("parameters", {}))
     sides = GEOMETRIES[PRESETS[base].geometry].boundaries["traction"]
     for side, load in data.get("traction", {}).items():
@@ -521,12 +537,7 @@ def from_toml(path, overrides: dict | None = None) -> Scene:
             raise ParameterError(f"{path.name}: traction_{side} is given twice ([parameters] traction_{side} and "
                                  f"[traction] {side}); give it once")
         values[f"traction_{side}"] = load
-    values |= dict(overrides or {})
-    name = data.get("name", path.stem)
-    try:
-        return make(name, values, base=base, description=data.get("description", ""), source=str(path.resolve()))
-    except ParameterError as err:
-        raise ParameterError(f"{path.name}: {err}") from None
+    return values
 
 
 def _toml_mesh_scene(path: Path, data: dict, overrides) -> Scene:

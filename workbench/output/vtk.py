@@ -190,19 +190,8 @@ def export(ds, folder, stem=None) -> list[Path]:
         raise ValueError("export: the result has no snapshots (u_nodes) to write")
     folder, stem = Path(folder), _stem(ds, stem)
     dim = _dim(ds)
-    points = _points3(ds, "vertex")
-    cells = ds.cell_vertices.values[:, : dim + 1]
-    quadratic = "u_edges" in ds
-    if quadratic:
-        edges = ds.edge_vertices.values
-        points = np.concatenate([points, points[edges].mean(axis=1)])
-        cells = _quadratic(ds, cells)
-    cell_type = CELL_TYPE[dim][int(quadratic)]
-    facets = contact_facets(ds)
-    used = np.unique(facets)
-    renumber = np.full(ds.sizes["vertex"], -1, dtype=np.int64)
-    renumber[used] = np.arange(len(used))
-    node_of_vertex = _node_order(ds, used)
+    points, cells, cell_type, quadratic = _volume_grid(ds)
+    facets, used, renumber, node_of_vertex = _contact_grid(ds)
     times = ds.time.values
     written, main, contact = [], [], []
     for i, t in enumerate(ds.snapshot_time.values):
@@ -229,6 +218,30 @@ def export(ds, folder, stem=None) -> list[Path]:
     written.append(atomic_write(folder / f"{stem}.pvd", lambda tmp: tmp.write_text(_pvd(main))))
     written.append(atomic_write(folder / f"{stem}_contact.pvd", lambda tmp: tmp.write_text(_pvd([e for _, e in contact]))))
     return written
+
+
+def _volume_grid(ds):
+    """Points, cells and meshio cell type of the body's grid, and whether it is quadratic (a run of order >= 2: the
+    edge midpoints appended as nodes, so ParaView draws the field's own values there)."""
+    dim = _dim(ds)
+    points = _points3(ds, "vertex")
+    cells = ds.cell_vertices.values[:, : dim + 1]
+    quadratic = "u_edges" in ds
+    if quadratic:
+        edges = ds.edge_vertices.values
+        points = np.concatenate([points, points[edges].mean(axis=1)])
+        cells = _quadratic(ds, cells)
+    return points, cells, CELL_TYPE[dim][int(quadratic)], quadratic
+
+
+def _contact_grid(ds):
+    """The contact grid: its facets (mesh vertex indices), the vertices they use, the map from mesh vertex to grid
+    point (-1 where unused), and each used vertex's index on the ``node`` axis (where the contact data live)."""
+    facets = contact_facets(ds)
+    used = np.unique(facets)
+    renumber = np.full(ds.sizes["vertex"], -1, dtype=np.int64)
+    renumber[used] = np.arange(len(used))
+    return facets, used, renumber, _node_order(ds, used)
 
 
 def _node_order(ds, used):

@@ -95,35 +95,9 @@ def rod_ode(scene, rtol=1e-11, atol=1e-13, model=None):
     delta, ell = loads.delta, model.geometry.extent[0]
     if not np.allclose(loads.u0(x=np.linspace(0, ell, 7)), delta(t=0.0)):
         raise ValueError("rod_ode needs u0 = delta(0) (constant): only then is u linear in x")
-    known = {"compliance": "compliance", "adhesion": "adhesion", "adhesion_flipped": "adhesion"}
-    unknown = [t for t in model.contact.terms if t.name not in known]
-    if unknown:
-        # name the term and the parameters that declare it, so the user knows what to switch off
-        what = "; ".join(f"{t.name!r}" + (f" (its parameters {', '.join(p.name for p in t.parameters)})"
-                                           if t.parameters else "") for t in unknown)
-        raise ParameterError(f"the rod reference 'ode' (rod_ode) solves the rod with the normal compliance (c_nu, "
-                             f"m_nu, gap) and the adhesive pull (gamma_nu, L) only; it cannot handle the contact term "
-                             f"{what}: switch it off, or compare with a finer run (reference = 'finest' or "
-                             "{'k': ...})")
-    terms = {known[t.name]: t for t in model.contact.terms}
-    a, b = model.elastic.modulus, model.viscous.modulus
-    comp, pull, law = terms.get("compliance"), terms.get("adhesion"), model.bonding
-    c_nu, m_nu, g = (comp.c_nu, comp.m_nu, comp.gap) if comp else (0.0, 1.0, 0.0)
-    gamma, L, sign = (pull.gamma_nu, pull.L, pull.sign) if pull else (0.0, 1.0, 1.0)
-
-    def clip(s, length):
-        return min(max(s, -length), length)
-
-    def rhs(t, y):
-        A, beta = y
-        end = delta(t=t) + A * ell
-        push = c_nu * max(end - g, 0.0) ** m_nu
-        adhesive = sign * gamma * beta * beta * max(-clip(end, L), 0.0)
-        rate = 0.0
-        if law is not None:
-            r = clip(end, law.L) if law.truncation == "symmetric" else max(-clip(end, law.L), 0.0)
-            rate = max(law.gamma_nu * beta * r ** 2 - law.eps_a, 0.0)
-        return [(-push + adhesive - a * A) / b, -rate]
+    terms = _rod_terms(model)
+    a, b, law = model.elastic.modulus, model.viscous.modulus, model.bonding
+    rhs = _rod_rhs(delta, ell, a, b, terms, law)
 
     # The right-hand side is only Lipschitz (kinks at end = 0, +-L, g): limit the step
     # so kinks are resolved; Radau's error control then does the rest.
@@ -141,6 +115,45 @@ def rod_ode(scene, rtol=1e-11, atol=1e-13, model=None):
     return RodSolution(delta=lambda t: np.broadcast_to(np.asarray(delta(t=t), dtype=float), np.shape(t)).copy(),
                        strain=lambda t: sol.sol(t)[0], strain_rate=strain_rate, beta=lambda t: sol.sol(t)[1],
                        a=a, b=b)
+
+
+def _rod_terms(model):
+    """The model's contact terms keyed by the law :func:`rod_ode` writes for them ("compliance", "adhesion"); any
+    other term is refused, by its name."""
+    known = {"compliance": "compliance", "adhesion": "adhesion", "adhesion_flipped": "adhesion"}
+    unknown = [t for t in model.contact.terms if t.name not in known]
+    if unknown:
+        # name the term and the parameters that declare it, so the user knows what to switch off
+        what = "; ".join(f"{t.name!r}" + (f" (its parameters {', '.join(p.name for p in t.parameters)})"
+                                           if t.parameters else "") for t in unknown)
+        raise ParameterError(f"the rod reference 'ode' (rod_ode) solves the rod with the normal compliance (c_nu, "
+                             f"m_nu, gap) and the adhesive pull (gamma_nu, L) only; it cannot handle the contact term "
+                             f"{what}: switch it off, or compare with a finer run (reference = 'finest' or "
+                             "{'k': ...})")
+    return {known[t.name]: t for t in model.contact.terms}
+
+
+def _rod_rhs(delta, ell, a, b, terms, law):
+    """The right-hand side of the reduced ODE for y = (A, beta), the laws written as scalar formulas."""
+    comp, pull = terms.get("compliance"), terms.get("adhesion")
+    c_nu, m_nu, g = (comp.c_nu, comp.m_nu, comp.gap) if comp else (0.0, 1.0, 0.0)
+    gamma, L, sign = (pull.gamma_nu, pull.L, pull.sign) if pull else (0.0, 1.0, 1.0)
+
+    def clip(s, length):
+        return min(max(s, -length), length)
+
+    def rhs(t, y):
+        A, beta = y
+        end = delta(t=t) + A * ell
+        push = c_nu * max(end - g, 0.0) ** m_nu
+        adhesive = sign * gamma * beta * beta * max(-clip(end, L), 0.0)
+        rate = 0.0
+        if law is not None:
+            r = clip(end, law.L) if law.truncation == "symmetric" else max(-clip(end, law.L), 0.0)
+            rate = max(law.gamma_nu * beta * r ** 2 - law.eps_a, 0.0)
+        return [(-push + adhesive - a * A) / b, -rate]
+
+    return rhs
 
 
 def rod_memory(scene, n=4000):

@@ -35,6 +35,24 @@ state  meaning              relation
 3      at the rigid limit   :math:`w = g`, :math:`-\sigma \ge F + c g`
 ===== ==================== ====================================
 
+The closed form of :func:`contact_response`: for given :math:`h` and
+:math:`\delta` the inclusion reads, in terms of :math:`w`,
+:math:`0 \in R(w) + G(w)` with the increasing affine map :math:`R(w) = (a/\ell)(w - \delta) + h` (the
+stress as a function of :math:`w`) and the maximal monotone graph
+:math:`G = \partial(\psi + I_{(-\infty, g]})`, so the solution is unique
+(it minimises :math:`\tfrac{a}{2\ell}(w - \delta)^2 + h w + \psi(w)` over
+:math:`w \le g`). It is found by walking up the graph:
+
+1. free value :math:`w_0 = \delta - h\ell/a` (:math:`\sigma = 0`); if
+   :math:`w_0 \le 0`: separated, :math:`w = w_0`;
+2. otherwise :math:`w = 0`, :math:`\sigma_0 = h - a\delta/\ell < 0`; if
+   :math:`-\sigma_0 \le F` (or :math:`g = 0`, where the layer is absent):
+   state 1 (or 3 if :math:`g = 0` and :math:`-\sigma_0 > F`);
+3. otherwise compliant,
+   :math:`w = (a\delta - \ell h - \ell F)/(a + c\ell) > 0`, i.e.
+   :math:`A = -(h + F + c\delta)/(a + c\ell)`, if :math:`w < g`;
+4. otherwise the rigid limit :math:`w = g`, :math:`A = (g - \delta)/\ell`.
+
 Two solvers are provided:
 
 * :func:`solve_prony` for a Prony kernel :math:`b(t) = \sum_i m_i e^{-t/\tau_i}`
@@ -139,22 +157,8 @@ def contact_response(h, delta, *, a, ell, F, c, g):
         -\sigma \in \partial\bigl(\psi + I_{(-\infty, g]}\bigr)(w),
         \quad \psi(r) = F r_+ + \tfrac{c}{2} r_+^2.
 
-    In terms of :math:`w` the inclusion reads :math:`0 \in R(w) + G(w)` with
-    the increasing affine map :math:`R(w) = (a/\ell)(w - \delta) + h` (the
-    stress as a function of :math:`w`) and the maximal monotone graph
-    :math:`G = \partial(\psi + I_{(-\infty, g]})`, so the solution is unique
-    (it minimises :math:`\tfrac{a}{2\ell}(w - \delta)^2 + h w + \psi(w)` over
-    :math:`w \le g`). It is found by walking up the graph:
-
-    1. free value :math:`w_0 = \delta - h\ell/a` (:math:`\sigma = 0`); if
-       :math:`w_0 \le 0`: separated, :math:`w = w_0`;
-    2. otherwise :math:`w = 0`, :math:`\sigma_0 = h - a\delta/\ell < 0`; if
-       :math:`-\sigma_0 \le F` (or :math:`g = 0`, where the layer is absent):
-       state 1 (or 3 if :math:`g = 0` and :math:`-\sigma_0 > F`);
-    3. otherwise compliant,
-       :math:`w = (a\delta - \ell h - \ell F)/(a + c\ell) > 0`, i.e.
-       :math:`A = -(h + F + c\delta)/(a + c\ell)`, if :math:`w < g`;
-    4. otherwise the rigid limit :math:`w = g`, :math:`A = (g - \delta)/\ell`.
+    The solution is unique; it is found by walking up the graph of the
+    inclusion (the closed form in the module docstring).
 
     Parameters
     ----------
@@ -197,7 +201,18 @@ def contact_response(h, delta, *, a, ell, F, c, g):
     """
     a, ell, F, c, g = _check_material(a, ell, F, c, g)
     h, delta = np.broadcast_arrays(np.asarray(h, dtype=float), np.asarray(delta, dtype=float))
+    (sep, surf, comp, rig), A, w = _walk_up_graph(h, delta, a, ell, F, c, g)
+    sigma = np.where(sep, 0.0, a * A + h)
+    state = np.select([sep, surf, comp, rig], [SEPARATED, STUCK, COMPLIANT, RIGID], SEPARATED)
+    return A, sigma, w, state.astype(int)
 
+
+def _walk_up_graph(h, delta, a, ell, F, c, g):
+    """The masks of the four contact states, the strain and the end displacement of :func:`contact_response`.
+
+    Every step of the walk up the graph (module docstring) is evaluated everywhere, then each point takes the first
+    step that applies.
+    """
     A_sep = -h / a
     w_sep = delta + A_sep * ell
     A_surf = -delta / ell
@@ -219,9 +234,7 @@ def contact_response(h, delta, *, a, ell, F, c, g):
         rig = ~sep & ~surf
         A = np.where(sep, A_sep, A_surf)
         w = np.where(sep, w_sep, 0.0)
-    sigma = np.where(sep, 0.0, a * A + h)
-    state = np.select([sep, surf, comp, rig], [SEPARATED, STUCK, COMPLIANT, RIGID], SEPARATED)
-    return A, sigma, w, state.astype(int)
+    return (sep, surf, comp, rig), A, w
 
 
 def _strain_scalar(h: float, delta: float, a, ell, F, c, g) -> float:
@@ -359,6 +372,14 @@ def solve_prony(*, a, moduli, taus, delta, T, ell=1.0, F, c, g, rtol=1e-10, atol
         integration fails.
     """
     a, ell, F, c, g = _check_material(a, ell, F, c, g)
+    T, moduli, taus, max_step = _check_prony(T, moduli, taus, rtol, atol, max_step, delta)
+    ode, nfev, nsteps = _integrate_memory(moduli, taus, delta, T, (a, ell, F, c, g), method, rtol, atol, max_step)
+    return PronySolution(a=a, ell=ell, F=F, c=c, g=g, T=T, moduli=moduli, taus=taus, delta=delta,
+                         ode=ode, nfev=nfev, nsteps=nsteps)
+
+
+def _check_prony(T, moduli, taus, rtol, atol, max_step, delta):
+    """The data of :func:`solve_prony` besides the material, checked: ``T``, ``moduli``, ``taus`` and ``max_step``."""
     T = _positive("T", T)
     moduli = np.atleast_1d(np.asarray(moduli, dtype=float))
     taus = np.atleast_1d(np.asarray(taus, dtype=float))
@@ -372,7 +393,11 @@ def solve_prony(*, a, moduli, taus, delta, T, ell=1.0, F, c, g, rtol=1e-10, atol
     _positive("atol", atol)
     max_step = T / 5000.0 if max_step is None else _positive("max_step", max_step)
     _check_callable("delta", delta, 0.0)
+    return T, moduli, taus, max_step
 
+
+def _memory_rhs(moduli, taus, delta, a, ell, F, c, g):
+    """The right-hand side q' = -q/tau + A(h, delta) of the memory variables, with h = sum_i m_i q_i."""
     inv_tau = 1.0 / taus
     m = len(moduli)
     mod_list = moduli.tolist()
@@ -384,20 +409,23 @@ def solve_prony(*, a, moduli, taus, delta, T, ell=1.0, F, c, g, rtol=1e-10, atol
         d = float(np.asarray(delta(t), dtype=float).reshape(-1)[0])
         return -q * inv_tau + _strain_scalar(h, d, a, ell, F, c, g)
 
+    return rhs
+
+
+def _integrate_memory(moduli, taus, delta, T, material, method, rtol, atol, max_step):
+    """The memory variables q(t) on [0, T] as a dense ODE solution, with the counts of evaluations and steps."""
+    m = len(moduli)
     if m == 0:
         # no memory: nothing to integrate; a trivial "ODE solution" for q
         def empty(t):
             return np.zeros((0, np.size(t)))
 
-        ode, nfev, nsteps = empty, 0, 0
-    else:
-        res = solve_ivp(rhs, (0.0, T), np.zeros(m), method=method, rtol=rtol, atol=atol,
-                        max_step=max_step, dense_output=True)
-        if not res.success:
-            raise ValueError(f"solve_ivp failed: {res.message}")
-        ode, nfev, nsteps = res.sol, int(res.nfev), len(res.t) - 1
-    return PronySolution(a=a, ell=ell, F=F, c=c, g=g, T=T, moduli=moduli, taus=taus, delta=delta,
-                         ode=ode, nfev=nfev, nsteps=nsteps)
+        return empty, 0, 0
+    res = solve_ivp(_memory_rhs(moduli, taus, delta, *material), (0.0, T), np.zeros(m), method=method, rtol=rtol,
+                    atol=atol, max_step=max_step, dense_output=True)
+    if not res.success:
+        raise ValueError(f"solve_ivp failed: {res.message}")
+    return res.sol, int(res.nfev), len(res.t) - 1
 
 
 class QuadratureSolution(NamedTuple):
@@ -458,23 +486,38 @@ def solve_quadrature(*, a, kernel, delta, T, n, ell=1.0, F, c, g):
     """
     a, ell, F, c, g = _check_material(a, ell, F, c, g)
     T = _positive("T", T)
-    if isinstance(n, bool) or not isinstance(n, (int, np.integer)) or n < 1:
-        raise ValueError(f"n must be an integer >= 1, got {n!r}")
-    n = int(n)
+    n = _steps(n)
     _check_callable("kernel", kernel, 0.0)
     _check_callable("delta", delta, 0.0)
+    k, t, b, d = _sample(kernel, delta, T, n)
+    a_eff = a + 0.5 * k * b[0]
+    if not a_eff > 0.0:
+        raise ValueError(f"a + k*b(0)/2 must be > 0, got {a_eff}; increase n")
+    A, sigma, w, state = _march(a, a_eff, k, b, d, dict(ell=ell, F=F, c=c, g=g))
+    return QuadratureSolution(t, A, sigma, w, state)
 
+
+def _steps(n) -> int:
+    """The number of steps of :func:`solve_quadrature`, checked: an integer (not a bool) >= 1."""
+    if isinstance(n, bool) or not isinstance(n, (int, np.integer)) or n < 1:
+        raise ValueError(f"n must be an integer >= 1, got {n!r}")
+    return int(n)
+
+
+def _sample(kernel, delta, T, n):
+    """The step k, the grid t_j = j k and the kernel and the end displacement on it (checked finite)."""
     k = T / n
     t = k * np.arange(n + 1)
     b = np.broadcast_to(np.asarray(kernel(t), dtype=float), t.shape).copy()
     d = np.broadcast_to(np.asarray(delta(t), dtype=float), t.shape).copy()
     if not (np.all(np.isfinite(b)) and np.all(np.isfinite(d))):
         raise ValueError("kernel(t) and delta(t) must be finite on [0, T]")
-    a_eff = a + 0.5 * k * b[0]
-    if not a_eff > 0.0:
-        raise ValueError(f"a + k*b(0)/2 must be > 0, got {a_eff}; increase n")
-    pars = dict(ell=ell, F=F, c=c, g=g)
+    return k, t, b, d
 
+
+def _march(a, a_eff, k, b, d, pars):
+    """A, sigma, w and the state on the grid, step by step: the past by the product rule, the new step in a_eff."""
+    n = len(d) - 1
     A = np.empty(n + 1)
     sigma = np.empty(n + 1)
     w = np.empty(n + 1)
@@ -486,7 +529,7 @@ def solve_quadrature(*, a, kernel, delta, T, n, ell=1.0, F, c, g):
         h_minus = k * (0.5 * b[j] * A[0] + np.dot(b[j - 1:0:-1], A[1:j]))
         r = contact_response(h_minus, d[j], a=a_eff, **pars)
         A[j], sigma[j], w[j], state[j] = (float(r[0]), float(r[1]), float(r[2]), int(r[3]))
-    return QuadratureSolution(t, A, sigma, w, state)
+    return A, sigma, w, state
 
 
 def richardson(coarse: QuadratureSolution, fine: QuadratureSolution, order: int = 2) -> QuadratureSolution:
