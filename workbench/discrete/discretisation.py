@@ -269,13 +269,6 @@ class Discretisation:
         return u_nu, ngs.CF(tuple(u[a] for a in g.facet_axes))
 
 
-def mesh_cells(mesh, dim):
-    """Vertex indices (0-based) of every cell of an NGSolve mesh, shape (cell, dim + 1)."""
-    ngm = mesh.ngmesh
-    elems = {1: ngm.Elements1D, 2: ngm.Elements2D, 3: ngm.Elements3D}[dim]().NumPy()
-    return np.array(elems["nodes"][:, : dim + 1], dtype=np.int64) - 1
-
-
 def vector_space(geometry, mesh, order):
     """The displacement space of order ``order`` with the body's Dirichlet conditions (H1 in 1D, VectorH1 otherwise)."""
     flags = geometry.dirichlet_flags()

@@ -17,7 +17,13 @@ import ngsolve as ngs
 import numpy as np
 
 from ..physics import kelvin_voigt
-from .discretisation import mesh_cells
+
+
+def mesh_cells(mesh, dim):
+    """Vertex indices (0-based) of every cell of an NGSolve mesh, shape (cell, dim + 1)."""
+    ngm = mesh.ngmesh
+    elems = {1: ngm.Elements1D, 2: ngm.Elements2D, 3: ngm.Elements3D}[dim]().NumPy()
+    return np.array(elems["nodes"][:, : dim + 1], dtype=np.int64) - 1
 
 
 class FieldOperators:

@@ -29,7 +29,8 @@ import numpy as np
 import scipy.sparse as sp
 
 from ..physics import kelvin_voigt
-from .discretisation import bonding_space, mesh_cells
+from .discretisation import bonding_space
+from .fields import mesh_cells
 
 
 class MeshInfo:

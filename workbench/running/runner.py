@@ -62,8 +62,7 @@ def run(scene=None, *, restart=None, checkpoint=None, progress=None, record_time
         A non-uniform time grid (overrides ``k``): from 0 to T, containing every snapshot
         and record time (else a ParameterError; without it the grid is made to contain them).
     limit : float, optional
-        Displacement (max over dofs) beyond which the run is stopped as diverged
-        (default: 10 x the body's largest extent).
+        The displacement beyond which the run stops as diverged (default: 10 x the body's size).
     threads : int, optional
         Run the setup and the time loop inside NGSolve's TaskManager with this many threads
         (default: none; 1.1-1.9x faster on idle cores, slower on busy ones: docs/conventions.md).
