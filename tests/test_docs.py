@@ -63,6 +63,7 @@ def test_there_are_snippets():
     assert len(blocks("python")) >= 3 and len(commands()) >= 8
 
 
+@pytest.mark.slow
 @pytest.mark.parametrize("code", blocks("python"))
 def test_python_block_runs(code, scratch):
     env = dict(os.environ, MPLBACKEND="Agg")  # a script's backend (no display here); notebooks are tested inline
@@ -70,7 +71,8 @@ def test_python_block_runs(code, scratch):
     assert p.returncode == 0, f"{code}\n--- stderr:\n{p.stderr[-3000:]}"
 
 
-@pytest.mark.parametrize("line", commands())
+@pytest.mark.slow
+@pytest.mark.parametrize("line", [pytest.param(c, marks=pytest.mark.mpi) if "mpiexec" in c else c for c in commands()])
 def test_command_runs(line, scratch):
     """`workbench ...` as this interpreter's module; `mpiexec -n N workbench ...` with the MPI launcher installed beside
     it (the test extra's mpich)."""

@@ -95,6 +95,7 @@ def _run_cli(*args, cwd=None):
     return subprocess.run([sys.executable, "-m", "workbench.cli", *args], capture_output=True, text=True, cwd=cwd)
 
 
+@pytest.mark.slow
 @pytest.mark.parametrize("case,message", [
     ("missing", "no such file"),
     ("unknown", "'botom' is not a boundary of the mesh.*did you mean 'bottom'"),
@@ -147,6 +148,7 @@ def test_bad_mesh_input_is_refused_by_name(slab_msh, tmp_path, case, message):
     assert not (tmp_path / "out.nc").exists()
 
 
+@pytest.mark.slow
 @pytest.mark.parametrize("scene,measure", [("memory_hertz", math.pi / 4), ("memory_hertz3d", math.pi / 6),
                                            ("tp5", 0.1)])
 def test_archives_describe_their_mesh_by_ugrid(tmp_path, scene, measure):

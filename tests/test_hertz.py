@@ -52,6 +52,7 @@ def test_p2_signorini_hertz_archives_its_midpoint_forces():
     assert length == pytest.approx(float(ds.midpoint_weight.sum()) * 1.5, rel=1e-12)  # Simpson: 1/3 vertices, 2/3 mid
 
 
+@pytest.mark.slow
 def test_elastic_hertz_3d_in_the_signorini_limit():
     """The hemisphere (its quarter): the pressure's L2 error against Hertz's sphere falls under refinement, the
     contact radius lies within one element of a, the force carries the load."""
@@ -179,6 +180,7 @@ def test_a_study_refines_the_contact_zone():
     assert ds.attrs["transfer"] == "interpolation (meshes not nested)"
 
 
+@pytest.mark.slow
 def test_both_model_a_schemes_on_a_curved_body():
     """The rocker of docs/examples (a curved sole, adhesion, compliance): only the part of the sole that touches has
     a foundation spring, so the explicit scheme's limit for the springs that act (the run's k_crit_min, 2.5 x the
@@ -210,6 +212,7 @@ def test_both_model_a_schemes_on_a_curved_body():
 
 
 
+@pytest.mark.slow
 def test_the_contact_zone_follows_the_parameter():
     """contact_zone sets the part of the curved side that is the contact boundary (refined with h_contact): the
     contact vertices lie within contact_zone x radius of the apex and reach its edge; a smaller zone has fewer

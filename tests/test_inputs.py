@@ -118,6 +118,7 @@ def test_run_attrs_contract():
     assert ds.attrs["status"] == "complete" and ds.attrs["contact"] == 1
 
 
+@pytest.mark.slow
 def test_divergence_stops_and_keeps(tmp_path):
     """An unstable explicit run stops at the first bad step; the steps before are kept and marked."""
     with pytest.warns(RuntimeWarning, match="allow_unstable"), pytest.raises(workbench.Diverged) as err:
@@ -168,6 +169,7 @@ def test_checking_a_scene_does_not_import_ngsolve(module):
     assert p.stdout.split() == ["False"], f"importing {module} (and checking a scene) imported ngsolve"
 
 
+@pytest.mark.slow
 def test_cli(tmp_path):
     run = lambda *a: subprocess.run([sys.executable, "-m", "workbench.cli", *a], capture_output=True, text=True)  # noqa: E731
     p = run("scenes")

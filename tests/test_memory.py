@@ -152,6 +152,7 @@ def test_limits(overrides):
         assert int(ds.n_compliant.max()) == 0
 
 
+@pytest.mark.slow
 def test_memory_slab_coupled_refinement():
     """Coupled k = 0.4 h against the finest case: order >= 0.9 in ||u - u_ref||_V (measured 0.91 over 5 levels)."""
     st = Study("memory_slab", h=[0.2, 0.1, 0.05, 0.025], k_over_h=0.4, n_compare=4, workers=2)
@@ -271,6 +272,7 @@ def test_slab_loaded_at_t0_against_independent_qp():
     assert u0 is None or np.abs(u0 - u_ref).max() <= 1e-6 * np.abs(u_ref).max()
 
 
+@pytest.mark.slow
 @pytest.mark.parametrize("memory", [dict(), dict(prony=(), kernel="exp(-t/0.2)", kernel_E=0.5)],
                          ids=["prony", "general kernel"])
 def test_rod_study_against_volterra_reference(memory):
@@ -282,6 +284,7 @@ def test_rod_study_against_volterra_reference(memory):
     assert "beta" not in ds and np.isfinite(ds.error_probe.values).all()
 
 
+@pytest.mark.slow
 def test_memory_benchmark_still_runs():
     """studies/bench_memory.py drives MemoryVI by hand (start, then steps, as the time loop does): its --help and a
     tiny run work against today's scheme protocol, and both kernels report a cost per step and the linear solves."""
@@ -301,6 +304,7 @@ def test_memory_benchmark_still_runs():
         assert out[memory]["ms_per_step"]["10"] > 0 and out[memory]["mean_solves"] >= 1
 
 
+@pytest.mark.slow
 def test_model_b_with_p2_elements():
     """Model B on P2 (2D): the constraint and the layer's law at the P2 nodes of the contact side (vertices and facet
     midpoints, Simpson-lumped). At the P1 rate h (the estimate is O(h)), P2 is more accurate: memory_slab against a

@@ -28,6 +28,7 @@ def execute(path, tmp_path, monkeypatch):
     return [c for c in nb.cells if c.cell_type == "code"]
 
 
+@pytest.mark.slow
 @pytest.mark.parametrize("path", NOTEBOOKS, ids=lambda p: p.stem)
 def test_notebook_shows_its_figures(path, tmp_path, monkeypatch):
     cells = execute(path, tmp_path, monkeypatch)

@@ -17,6 +17,7 @@ def _cli(*args, cwd=None):
                           timeout=600)
 
 
+@pytest.mark.slow
 def test_archive_metadata_survives_the_round_trip(tmp_path):
     """CF Conventions, the full command in history, NAME_units for every parameter attribute that has a unit,
     long_name and units on every coordinate - in the archive a CLI run writes, read back from disk."""
@@ -97,6 +98,7 @@ def test_model_b_overview_and_vtk_show_pressure_and_states(tmp_path):
     assert np.isnan(mesh.point_data["contact_pressure"][~free]).all()
 
 
+@pytest.mark.slow
 def test_run_with_output_prints_one_status_line(tmp_path):
     """`workbench run ... -o` says what happened: status, steps and time in one line, then where it wrote."""
     p = _cli("run", "tp1", "--h", "0.1", "--k", "0.05", "-o", str(tmp_path / "r.nc"), "--no-progress")

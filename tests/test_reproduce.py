@@ -35,6 +35,7 @@ def results(tmp_path_factory):
     return {tp: reproduce.reproduce(tp, out, **SIZES[tp]) | {"out": out} for tp in reproduce.PROBLEMS}
 
 
+@pytest.mark.slow
 def test_tp1_errors_meet_the_paper(results):
     """Problem 1 at h = k = 0.01 against the closed form: the paper's bounds 1.8e-4 and 4e-6."""
     n = results["tp1"]["numbers"]
@@ -132,6 +133,7 @@ def test_main_prints_the_comparison(tmp_path, capsys):
     assert (tmp_path / "tp1_bonding.png").exists()
 
 
+@pytest.mark.slow
 @pytest.mark.parametrize("form", ["--out=DIR", "--out DIR"])
 def test_reproduce_script_writes_where_out_says(tmp_path, form):
     """studies/reproduce.py writes into data/reproduction unless told otherwise; ``--out=DIR`` was not seen (the

@@ -110,6 +110,7 @@ KILL_RUN = ["run", "tp5", "--scheme", "bdf2", "--h", "0.05", "--k", "0.001", "--
             "--set", "checkpoint_every=25"]
 
 
+@pytest.mark.slow
 def test_killed_runs_continue_from_their_checkpoints(tmp_path):
     """SIGKILL at random moments, at least 10 times: just after a checkpoint, in the middle of writing one (its
     temporary file exists: the previous checkpoint must survive intact), or anywhere (start-up, steps). Each time the

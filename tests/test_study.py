@@ -51,6 +51,7 @@ def test_transfer_is_exact_on_nested_meshes():
     assert np.allclose(gf(pts), g(coarse.mesh(np.array([0.123, 0.77]), np.array([0.031, 0.089]))), atol=1e-13)
 
 
+@pytest.mark.slow
 def test_slab_coupled_sweep():
     """2D slab (tp5 load), coupled k = 0.2 h (explicit, k < k_crit), against the finest case.
 
@@ -68,6 +69,7 @@ def test_slab_coupled_sweep():
     assert ds.attrs["transfer"] == "nested prolongation (exact)"
 
 
+@pytest.mark.slow
 def test_block_sweep():
     """3D block (P2), h-sweep at fixed k against the finest case: paper-norm order >= 0.8 (measured 1.13)."""
     st = Study("block", h=[0.1, 0.05, 0.025], k=[0.005], order=[2], T=0.05, n_compare=3, workers=2,
@@ -96,6 +98,7 @@ def test_fit_order_skips_unusable_points():
     assert fit_order([0.1, 0.05, 0.025, 0.01], [0.1, np.nan, 0.025, 0.01])[0] == pytest.approx(1.0)
 
 
+@pytest.mark.slow
 def test_pareto_and_cheapest():
     st = Study("tp2", k=[0.02, 0.01, 0.005], scheme=["explicit", "implicit"], reference="ode", workers=0)
     ds = st.run(progress=False)
@@ -112,6 +115,7 @@ def _study_cmd(out):
             "--reference", "ode", "--workers", "2", "--no-progress", "-o", str(out)]
 
 
+@pytest.mark.slow
 def test_kill_and_resume(tmp_path):
     """A sweep killed after its first case resumes without recomputing it; the result equals an uninterrupted run."""
     out = tmp_path / "resumed.nc"
@@ -137,6 +141,7 @@ def test_kill_and_resume(tmp_path):
     xr.testing.assert_identical(a.drop_vars(costs), b.drop_vars(costs))
 
 
+@pytest.mark.slow
 def test_dask_local_cluster():
     """Cases run on a dask.distributed LocalCluster with 2 workers give the same errors as local processes."""
     distributed = pytest.importorskip("distributed")
@@ -151,6 +156,7 @@ def _cli(*args, **kw):
     return subprocess.run([sys.executable, "-m", "workbench.cli", *args], capture_output=True, text=True, **kw)
 
 
+@pytest.mark.slow
 def test_case_files_are_keyed_by_every_input(tmp_path):
     """The same sweep with other scene values recomputes its cases and says why (the stale cases gave order 0 and
     an error of 0.133 while the archive claimed gamma_nu = 1.5); the same inputs again reuse them."""
@@ -170,6 +176,7 @@ def test_case_files_are_keyed_by_every_input(tmp_path):
     assert stamps == {p.name: p.stat().st_mtime_ns for p in (tmp_path / "s.nc.cases").glob("*.nc")}
 
 
+@pytest.mark.slow
 def test_damaged_case_files_are_recomputed(tmp_path):
     """An empty and a truncated case file (a kill, a full disk) are recomputed with a warning, not a traceback."""
     cases = tmp_path / "cases"
@@ -207,6 +214,7 @@ print("order", float(ds.observed_order.sel(norm="error", along="k").squeeze()))
 """
 
 
+@pytest.mark.slow
 @pytest.mark.parametrize("how", ["script", "stdin"])
 def test_study_with_workers_in_a_plain_script(tmp_path, how):
     """Default worker processes, no main guard: as a plain script and fed on standard input (the spawned pool of
@@ -235,6 +243,7 @@ def _alive(pid):
     return stat != "Z"
 
 
+@pytest.mark.slow
 @pytest.mark.parametrize("sig", [signal.SIGTERM, signal.SIGKILL])
 def test_workers_exit_when_the_study_is_killed(tmp_path, sig):
     """Killing the `workbench study` process (plain kill or kill -9) leaves no worker running: the workers exit with it
@@ -257,6 +266,7 @@ def test_workers_exit_when_the_study_is_killed(tmp_path, sig):
     assert not any(_alive(w) for w in workers)
 
 
+@pytest.mark.slow
 def test_single_case_study_is_refused():
     """reference = 'finest' with one case: nothing to compare; refused before any work (it exited 0 with NaN)."""
     with pytest.raises(workbench.ParameterError, match="single case"):
@@ -275,6 +285,7 @@ def test_study_axis_values_are_checked():
         Study("tp1", k=[0.02, 0.01], reference="ode", workers=-1)
 
 
+@pytest.mark.slow
 def test_study_set_of_a_swept_name():
     """`--set h=...` in a study was dropped silently: it is the scene value (honoured) unless --h sweeps it too."""
     p = _cli("study", "tp2", "--k", "0.02", "0.01", "--set", "k=0.01", "--reference", "ode", "--workers", "0")
@@ -295,6 +306,7 @@ def test_sweep_any_parameter_with_its_own_reference():
     assert ds.observed_order.sel(norm="error", along="h").dims == ("order", "scheme", "c_nu")
 
 
+@pytest.mark.slow
 def test_tolerance_sweep_of_error_controlled_runs(tmp_path):
     """An rtol axis: error-controlled runs have no fixed grid, so they are recorded and compared at the common
     comparison times (which the controller lands on); the achieved error falls with the tolerance and stays
@@ -341,6 +353,7 @@ def test_k_over_h_does_not_rebuild_the_scene(monkeypatch):
     assert calls and {} not in calls
 
 
+@pytest.mark.slow
 def test_couple_any_pair_of_axes():
     """A coupling of any parameter to any axis, not only k = C h (it was "must depend on h only"): gamma_nu = 0.1 c_nu
     makes c_nu and gamma_nu the coordinates of ``level`` (not a refinement series: orders are fitted along h, per
@@ -387,6 +400,7 @@ def test_case_history_abbreviates_long_record_times(tmp_path):
         assert len(history) < 200 and "record_times=[0.0, 0.002, 0.004, ..., 0.998, 1.0] (501 values)" in history
 
 
+@pytest.mark.slow
 def test_case_files_are_keyed_by_scheme_options_and_versions(tmp_path):
     """A scheme option (here the tolerance of error-controlled steps, and the memory rule of Model B) and the
     package versions are inputs of a case too: a case file made otherwise is recomputed, and the reason names it."""
@@ -426,6 +440,7 @@ def test_a_finer_run_reference_of_a_tolerance_sweep_takes_fixed_steps():
                  reference={"k": 0.001, "rtol": 1e-6}, T=0.1, workers=0).reference.cases()[0].values()["rtol"] == 1e-6
 
 
+@pytest.mark.slow
 def test_a_longer_T_continues_the_archived_cases(tmp_path):
     """A sweep run again with T doubled continues every archived case (the 2D slab with bonding, its finer-run
     reference too) from its final state instead of from t = 0: the errors and records equal those of a sweep run
@@ -464,6 +479,7 @@ def test_a_longer_T_continues_the_archived_cases(tmp_path):
     assert off.overhead["new_cases"] == 3 and off.overhead["extended_cases"] == 0
 
 
+@pytest.mark.slow
 def test_an_error_controlled_case_is_not_extended(tmp_path):
     kw = dict(sweep={"rtol": [1e-2, 1e-3]}, scheme="implicit", reference="exact", workers=0)
     Study("tp1", T=0.5, **kw).run(tmp_path, progress=False)

@@ -4,7 +4,10 @@ import os
 import subprocess
 import sys
 
+import pytest
 
+
+@pytest.mark.slow
 def test_import_leaves_the_process_alone_and_a_run_gives_the_pools_back():
     """`import workbench` in a user's fresh process, before NumPy, sets no thread variable; a run holds every BLAS
     pool at one thread and leaves them as the user had them (here: 2 threads each)."""

@@ -69,6 +69,7 @@ def test_bdf2_linear_kelvin_voigt_order_two(name, order_of):
     assert errs[-1] < 1e-5 * np.abs(exact(0.2)).max()
 
 
+@pytest.mark.slow
 def test_memory_trapezoid_second_order_without_state_changes(order_of):
     """Model B rod, the contact state fixed (compliant all the time): the trapezoid rule is second order to the
     Volterra reference, the rectangle rule first order."""
@@ -94,6 +95,7 @@ def test_memory_trapezoid_second_order_without_state_changes(order_of):
 TOLERANCES = [1e-2, 1e-3, 1e-4, 1e-5]
 
 
+@pytest.mark.slow
 @pytest.mark.parametrize("name", ["tp1", "tp2"])
 @pytest.mark.parametrize("scheme", ["implicit", "bdf2"])
 def test_achieved_error_follows_the_tolerance_on_the_rods(name, scheme):
@@ -125,6 +127,7 @@ def slab_reference():
     return CubicSpline(ds.time.values, u), CubicSpline(ds.time.values, ds.beta.values, axis=0), np.abs(u).max()
 
 
+@pytest.mark.slow
 @pytest.mark.parametrize("scheme, tolerances", [("bdf2", TOLERANCES[:3]), ("implicit", TOLERANCES[:2])])
 def test_achieved_error_follows_the_tolerance_on_the_slab(slab_reference, scheme, tolerances):
     """Debonding slab with contact, glue and a load on half the top: the tip error and the beta error within
@@ -145,6 +148,7 @@ def test_achieved_error_follows_the_tolerance_on_the_slab(slab_reference, scheme
     assert all(a > b for a, b in zip(achieved, achieved[1:])), achieved
 
 
+@pytest.mark.slow
 def test_memory_tolerance_rectangle_rule():
     """Model B rod through all four contact states ('vi', rectangle rule): achieved error within [0.1, 10] x rtol,
     falling with it. (The trapezoid rule's estimate is conservative: its achieved error is 0.01-0.07 x rtol.)"""
@@ -206,6 +210,7 @@ def test_a_rejected_step_leaves_the_state_bitwise_as_before(name, scheme, extra)
     _state_equal(s.state(), first)
 
 
+@pytest.mark.slow
 def test_contact_switch_is_not_stepped_over():
     """The rod end reaches the foundation at t = 0.37 exactly (delta = 0.1 (t - 0.37), nothing else acts before):
     an adaptive run ends a step within k_min of it, both schemes; with the tolerance alone it would not."""
@@ -259,6 +264,7 @@ def test_a_kink_is_charged_against_its_share_of_the_tolerance():
     assert crossed_fraction(before, after) == pytest.approx(3 / 5)
 
 
+@pytest.mark.slow
 def test_bdf2_steps_reuse_their_factorisations(monkeypatch):
     """BDF2's matrix a0 K_A + K_G depends on the step and the step ratio. An error-controlled run shortens a free step
     (by < 9 %) so that a0 lies on the grid 2^(j/8), and so meets the same few matrices again: on the slab (h = 0.1,

@@ -272,6 +272,7 @@ ITEM9 = _cases("item9", {
 })
 
 
+@pytest.mark.slow
 @pytest.mark.parametrize("key", list(ITEM9))
 def test_traceback_inputs_are_one_line_errors(cli, key):
     """Each of these inputs ends in a Python traceback (or a 10 kB echo) today. Expected: exit 2, one line
@@ -286,6 +287,7 @@ MATHTEXT = _cases("mathtext", {
 })
 
 
+@pytest.mark.slow
 @pytest.mark.parametrize("key", list(MATHTEXT))
 def test_scene_name_with_dollars_and_plot(cli, key):
     """A TOML ``name`` with ``$...$`` (not valid mathtext) and ``--plot``: today the run completes and then
@@ -326,6 +328,7 @@ def _path_cases():
 PATHS = _cases("paths", _path_cases())
 
 
+@pytest.mark.slow
 @pytest.mark.parametrize("key", list(PATHS))
 def test_bad_output_path_refused_before_the_run(cli, key):
     """An ``-o``, ``--plot`` or ``--vtk`` target that cannot be written (an existing directory where a file is
@@ -397,6 +400,7 @@ sys.exit(main(sys.argv[1:]))
 """
 
 
+@pytest.mark.slow
 @pytest.mark.parametrize("archive", [True, False], ids=["with -o", "without -o"])
 def test_plot_and_vtk_failing_at_the_end_exit_4_and_say_where_the_result_is(tmp_path, archive):
     """``--plot`` / ``--vtk`` that cannot be written after the run (disk full) ended in a traceback (exit 1): exit 4
@@ -417,6 +421,7 @@ def test_plot_and_vtk_failing_at_the_end_exit_4_and_say_where_the_result_is(tmp_
     assert workbench.load(kept).attrs["status"] == "complete"
 
 
+@pytest.mark.slow
 def test_reproduce_of_a_diverging_run_exits_3(tmp_path):
     """A run of ``workbench reproduce`` that diverges (tp1 pulled beyond 10 x its length) ended in a traceback: exit 3
     as ``workbench run``, one ``error:`` line, and the computed part kept (marked incomplete)."""
@@ -444,6 +449,7 @@ def study_archive(tmp_path_factory):
     return d
 
 
+@pytest.mark.slow
 @pytest.mark.parametrize("damage", ["empty", "truncated"])
 def test_damaged_case_file_is_recomputed(study_archive, tmp_path, damage):
     """A study rerun whose case folder holds an empty or truncated case file (a killed or full-disk write)
@@ -518,6 +524,7 @@ ITEM13 = _cases("item13", {
 })
 
 
+@pytest.mark.slow
 @pytest.mark.parametrize("key", list(ITEM13))
 def test_silently_dropped_options_are_refused(cli, key):
     """Today these run and exit 0 while part of the input is dropped (a study's ``--set h/k/order/scheme`` beside
@@ -572,6 +579,7 @@ SHADOW = _cases("shadow", {"./tp1 file": Cli(("run", "tp1", *RUN_TINY, "-o", "ou
     tp1='scene = "tp2"\ndescription = "a file that happens to be called tp1"\n'))})
 
 
+@pytest.mark.slow
 def test_file_named_like_a_builtin_scene_is_not_silent(cli):
     """A file ``./tp1`` in the working directory silently replaces the built-in ``tp1`` today, while the archive
     records ``scene = "tp1"``. Expected, either: refused as ambiguous (exit 2, one line naming ``tp1``), or run with
@@ -762,6 +770,7 @@ ITEM14 = _cases("item14", {
 })
 
 
+@pytest.mark.slow
 @pytest.mark.parametrize("key", list(ITEM14))
 def test_toml_name_cannot_escape_the_vtk_folder(cli, key):
     """The TOML ``name`` is the VTK file stem: today ``../../x`` or an absolute path writes outside the requested
@@ -793,6 +802,7 @@ def test_run_stays_the_function_after_the_study_imports_the_runner():
     assert out.stdout.split() == ["function", "complete"]
 
 
+@pytest.mark.slow
 def test_output_piped_into_head_ends_quietly():
     """`workbench show tp5 | head -1`: the reader leaves early (here: before the first line, `| true`); the command
     stops without a traceback."""
