@@ -258,3 +258,22 @@ def test_longer_T_is_refused_for_a_fitted_kernel_and_said_for_error_control(tmp_
     d = workbench.run("slab", T=0.6, **slab)
     tip = lambda ds: float(ds.u_probe.isel(probe=-1, time=-1).sel(component="y"))  # noqa: E731
     assert abs(tip(c) - tip(d)) <= 1e-3 * abs(tip(d))
+
+
+@pytest.mark.parametrize("scene, values, T1, T2", [
+    ("memory_slab", dict(h=0.2, k=0.02), 0.4, 0.8),        # the preset's snapshots 0.25, 0.75 split steps of 0.02
+    ("hertz", dict(h=0.2, k=0.02), 0.3, 1.0),               # its snapshots 0.25, 0.75 too; Model A, implicit
+    ("tp4", dict(T=0.1, k=0.01), 0.1, 0.37),                 # a T2 off the snapshot times, explicit
+])
+def test_a_run_to_any_later_T_continues_bitwise(tmp_path, scene, values, T1, T2):
+    """Restart for every T (SPEC, Restart): a run to T1 continued to T2 equals the run straight to T2, bitwise, also
+    where the preset's snapshot times split steps (they were refused: the grid divided the stretches between
+    snapshots evenly, so T1's steps were not T2's) and where the preset's snapshots beyond T1 come back at T2."""
+    path = tmp_path / "first.nc"
+    workbench.write(workbench.run(scene, progress=False, **dict(values, T=T1)), path)
+    continued = workbench.run(restart=path, T=T2, progress=False)
+    straight = workbench.run(scene, progress=False, **dict(values, T=T2))
+    np.testing.assert_array_equal(continued.time.values, straight.time.values)
+    np.testing.assert_array_equal(continued.u_contact.values, straight.u_contact.values)
+    np.testing.assert_array_equal(continued.snapshot_time.values, straight.snapshot_time.values)
+    np.testing.assert_array_equal(continued.u_dofs.values, straight.u_dofs.values)

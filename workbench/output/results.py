@@ -375,6 +375,7 @@ def provenance(scene, extra: dict, call: str = "", terms=None) -> dict:
              "terms": ",".join(scene.terms if terms is None else terms) or "none"}
     attrs |= {k: attr_value(v) for k, v in scene.values.items()}
     attrs["parameters_json"] = json.dumps(scene.plain(), sort_keys=True)
+    attrs["set_by_user_json"] = json.dumps(sorted(scene.set_by_user))
     attrs |= {k: attr_value(v) for k, v in extra.items()}
     for k in list(scene.values) + list(extra):
         unit = PARAMETERS[k].unit if k in PARAMETERS else ATTR_UNITS.get(k)

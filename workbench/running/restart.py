@@ -239,11 +239,15 @@ def read(path):
     return ds, state
 
 
-def archived_scene(ds: xr.Dataset, **overrides):
-    """The scene of an archive (every value from ``parameters_json``), with ``overrides``."""
+def archived_scene(ds: xr.Dataset, *, whole: bool = False, **overrides):
+    """The scene of an archive with ``overrides``: the values its user gave (``set_by_user_json``), the rest the
+    scene's own for the new values (the preset's snapshot times up to a longer T, say); ``whole``: every value as
+    archived (``parameters_json``; so are archives that do not say what their user gave)."""
     a = ds.attrs
-    values = json.loads(a["parameters_json"]) | overrides
-    return scenes.make(a["scene"], values, base=a["base_scene"], description=a.get("description", ""))
+    values = json.loads(a["parameters_json"])
+    if not whole and "set_by_user_json" in a:
+        values = {name: values[name] for name in json.loads(a["set_by_user_json"]) if name in values}
+    return scenes.make(a["scene"], values | overrides, base=a["base_scene"], description=a.get("description", ""))
 
 
 def _text(value) -> str:
@@ -277,7 +281,7 @@ def differences(old, new, t: float, old_terms: str, new_terms: str) -> list:
 def check(path, archive: xr.Dataset, state: dict, scene, model_terms) -> None:
     """Refuse (ParameterError) a continuation of ``archive`` as ``scene`` that the archive's run would not be."""
     t = state["time"]
-    old = archived_scene(archive)
+    old = archived_scene(archive, whole=True)  # (a default changed since by another version is a difference)
     diff = differences(old, scene, t, archive.attrs.get("terms", ""), ",".join(model_terms) or "none")
     if diff:
         raise ParameterError(f"restart {str(path)!r}: the run asked for differs from the archive's in "

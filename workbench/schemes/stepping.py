@@ -25,18 +25,22 @@ from ..errors import Diverged
 def time_grid(T: float, k: float, times=None, sync=()) -> np.ndarray:
     """Grid 0 = t_0 < ... < t_N = T with steps <= k containing the ``sync`` times, or a checked user grid.
 
-    A sync time (a snapshot or a requested record) is a point of the grid, exactly: one that
-    the uniform grid meets within round-off (0.3 = 3 x 0.1 to 1e-9 T) replaces that point, else
-    the stretches between sync times are divided into equal steps <= k. A user grid ``times``
-    must end at T and contain every sync time (to round-off); otherwise ValueError, as for a
-    sync time outside [0, T]: a requested time is never dropped or moved.
+    The grid is the uniform one of N = ceil(T / k) equal steps. A sync time (a snapshot or a
+    requested record) is a point of the grid, exactly: one that the uniform grid meets within
+    round-off (0.3 = 3 x 0.1 to 1e-9 T) replaces that point, any other splits the step that
+    holds it in two; the steps around it do not move. So the grid of a run to T1, where T1 is a
+    point of the uniform grid to T2 > T1, is the start of the grid to T2 (with the same sync
+    times up to T1): a run continued from T1 to T2 takes the steps of the run straight to T2
+    (:mod:`workbench.running.restart`). A user grid ``times`` must end at T and contain every
+    sync time (to round-off); otherwise ValueError, as for a sync time outside [0, T]: a
+    requested time is never dropped or moved.
 
     Examples
     --------
     >>> time_grid(1.0, 0.25).tolist()
     [0.0, 0.25, 0.5, 0.75, 1.0]
-    >>> time_grid(1.0, 0.4, sync=(0.5,)).tolist()
-    [0.0, 0.25, 0.5, 0.75, 1.0]
+    >>> [round(float(t), 6) for t in time_grid(1.0, 0.4, sync=(0.5,))]  # three steps of 1/3, the second split at 0.5
+    [0.0, 0.333333, 0.5, 0.666667, 1.0]
     >>> float(time_grid(1.0, 0.1, sync=(0.3,))[3])  # not 0.30000000000000004
     0.3
     """
@@ -61,11 +65,9 @@ def time_grid(T: float, k: float, times=None, sync=()) -> np.ndarray:
     n = max(1, math.ceil(T / k - 1e-9))
     grid = np.linspace(0.0, T, n + 1)
     inside = [s for s in sync if tol < s < T - tol]
-    if all(np.min(np.abs(grid - s)) <= tol for s in inside):
-        return _land(grid, inside, tol)
-    marks = [0.0] + inside + [float(T)]
-    parts = [np.linspace(a, b, max(1, math.ceil((b - a) / k - 1e-9)) + 1)[:-1] for a, b in zip(marks, marks[1:])]
-    return np.concatenate(parts + [np.array([float(T)])])
+    grid = _land(grid, inside, tol)
+    off = [s for s in inside if np.min(np.abs(grid - s)) > tol]
+    return np.sort(np.concatenate([grid, off])) if off else grid
 
 
 def _land(grid, sync, tol):
