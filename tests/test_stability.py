@@ -40,7 +40,10 @@ def test_k_crit_matches_issue_figures():
     ("tp4", dict(contact=False, gamma_nu=20.0, h=0.025, T=0.3)),  # adhesive spring in tension
 ])
 def test_predicted_k_crit_brackets_onset(name, overrides):
-    """Stable just below the predicted k_crit, unstable (detected and stopped) at twice it."""
+    """Stable just below the predicted k_crit, unstable (detected and stopped) at twice it: by the step limit (it
+    warns at the start or when the springs reach a limit below k) or by the blow-up watchers (tp4's adhesive spring at
+    k = 0.0079 s: the velocity alternates from step 1 and the watcher stops the run at step 13, while the acting
+    springs' limit is still 0.013 s; on the grid before issue 25's, 0.0077 s steps, the step limit had caught it)."""
     k_crit = stability.critical_step(workbench.scene(name, **overrides)).k_crit
     ds = workbench.run(name, k=0.95 * k_crit, progress=False, **overrides)
     assert ds.attrs["status"] == "complete" and np.abs(ds.u_contact).max() < 1.0
@@ -48,9 +51,10 @@ def test_predicted_k_crit_brackets_onset(name, overrides):
         warnings.simplefilter("ignore", RuntimeWarning)
         with pytest.raises(workbench.Diverged) as err:
             workbench.run(name, k=2.0 * k_crit, allow_unstable=True, progress=False, **overrides)
-    # (1: overridden at the start; 2: during the run, when the springs reached a limit below k)
-    assert err.value.dataset.attrs["stability_override"] in (1, 2)
-    assert err.value.dataset.attrs["status"] == "incomplete"
+    # (1: overridden at the start; 2: during the run, when the springs reached a limit below k; else a watcher)
+    attrs = err.value.dataset.attrs
+    assert attrs["stability_override"] in (1, 2) or "oscillation" in attrs["failure"] or "chatter" in attrs["failure"]
+    assert attrs["status"] == "incomplete"
 
 
 def tip(ds):

@@ -30,10 +30,28 @@ MAX_LINE = 600
 
 
 class _Parser(argparse.ArgumentParser):
-    """argparse, but a usage mistake is one ``error:`` line (and the usage hint) like every other."""
+    """argparse, but a usage mistake is one ``error:`` line (and the usage hint) like every other, and an option
+    that takes one value refuses a second (argparse keeps the last silently: ``-o a.nc -o b.nc``)."""
 
     def error(self, message):
         raise ParameterError(f"{message} (see: {self.prog} --help)")
+
+    def add_argument(self, *args, **kwargs):
+        if kwargs.get("action") is None and kwargs.get("nargs") is None and args and args[0].startswith("-"):
+            kwargs["action"] = _Once
+        return super().add_argument(*args, **kwargs)
+
+
+class _Once(argparse.Action):
+    """An option given at most once."""
+
+    def __call__(self, parser, namespace, values, option_string=None):
+        given = namespace.__dict__.setdefault("_given_once", set())
+        if self.dest in given:
+            raise ParameterError(f"{option_string} is given twice ({getattr(namespace, self.dest)!r} and {values!r}); "
+                                 "give it once")
+        given.add(self.dest)
+        setattr(namespace, self.dest, values)
 
 
 def _one_line(text: str) -> str:
@@ -76,21 +94,31 @@ def _overrides(args, swept=()) -> dict:
 
 def _check_outputs(args, *, cases=None) -> None:
     """Every output target is checked before any work (a bad path would lose the whole run)."""
+    from pathlib import Path
+
     from .output.files import check_output
 
-    if getattr(args, "output", None):
-        check_output(args.output, "-o")
+    given = {}
+    if getattr(args, "output", None) is not None:
+        given["-o"] = check_output(args.output, "-o")
         if cases:
-            check_output(args.output + ".cases", "-o (its case folder)", folder=True)
+            given["-o (its case folder)"] = check_output(args.output + ".cases", "-o (its case folder)", folder=True)
     for option, folder in (("plot", False), ("pareto", False), ("vtk", True)):
         value = getattr(args, option, None)
-        if value:
-            check_output(value, f"--{option}", folder=folder)
+        if value is not None:
+            given[f"--{option}"] = check_output(value, f"--{option}", folder=folder)
+    seen = {}
+    for option, path in given.items():  # two outputs in one file: the later would replace the earlier
+        key = Path(os.path.abspath(path))
+        if key in seen:
+            raise ParameterError(f"{seen[key]} and {option} name the same path {str(path)!r}; give each its own")
+        seen[key] = option
 
 
 def _threads(value):
-    if value is not None and value < 1:
-        raise ParameterError(f"--threads {value}: give an integer >= 1 (NGSolve TaskManager threads)")
+    if value is not None and not 1 <= value <= 256:
+        raise ParameterError(f"--threads {value}: give an integer from 1 to 256 (NGSolve TaskManager threads; this "
+                             f"machine has {os.cpu_count()} cores)")
     return value
 
 

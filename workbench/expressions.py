@@ -179,6 +179,39 @@ def _walk(node, env, funcs, const):
     raise AssertionError(f"unchecked node {type(node).__name__}")  # _check rejects these
 
 
+#: A sum (or product) of more terms than this is regrouped as a balanced tree: ``a + b + c + ...`` is a left-deep
+#: chain as Python parses it, and a load written as a sum of 120 terms was refused as "nested 120 levels deep".
+LONG_CHAIN = 32
+
+
+def _balanced(node):
+    """``node`` with every long chain of + and - (or of *) regrouped as a balanced tree of depth log2(terms), walked
+    without recursion down the chain (a short chain stays as written, so its rounding does not change)."""
+    if not isinstance(node, ast.BinOp):
+        if isinstance(node, (ast.UnaryOp, ast.Call)):
+            for field in ("operand",) if isinstance(node, ast.UnaryOp) else ():
+                setattr(node, field, _balanced(getattr(node, field)))
+            if isinstance(node, ast.Call):
+                node.args = [_balanced(a) for a in node.args]
+        return node
+    kinds = (ast.Add, ast.Sub) if isinstance(node.op, (ast.Add, ast.Sub)) else (type(node.op),)
+    parts, cur = [], node
+    while isinstance(cur, ast.BinOp) and isinstance(cur.op, kinds) and isinstance(cur.op, (ast.Add, ast.Sub, ast.Mult)):
+        parts.append((isinstance(cur.op, ast.Sub), cur.right))
+        cur = cur.left
+    parts.append((False, cur))
+    if len(parts) <= LONG_CHAIN:
+        node.left, node.right = _balanced(node.left), _balanced(node.right)
+        return node
+    items = [ast.UnaryOp(op=ast.USub(), operand=_balanced(t)) if negative else _balanced(t)
+             for negative, t in reversed(parts)]
+    op = ast.Mult if isinstance(node.op, ast.Mult) else ast.Add
+    while len(items) > 1:
+        items = [ast.BinOp(left=items[i], op=op(), right=items[i + 1]) if i + 1 < len(items) else items[i]
+                 for i in range(0, len(items), 2)]
+    return ast.copy_location(items[0], node)
+
+
 def _check(node, text, name, allowed, depth=0):
     """Reject anything outside the grammar, naming the parameter and the token."""
     where = f"in {name} = {_shown(text)}" if name else f"in {_shown(text)}"
@@ -250,7 +283,7 @@ def parse(text, *, name: str = "", allowed=VARIABLES, size: int | None = None) -
         raise ExpressionError(f"in {name} = {_shown(expr.source)}: {bad[0]!r} not allowed here (allowed: "
                               f"{', '.join(allowed)})")
     if size is not None and expr.size != size:
-        if expr.size == 1 and expr.is_zero():
+        if expr.size == 1 and expr.is_zero() and "," not in expr.source:  # (a plain 0 is the zero vector; (0,) not)
             return Expression(expr.source, expr.terms * size, expr.variables)
         raise ExpressionError(
             f"{name} = {_shown(expr.source)} has {expr.size} component(s), {size} are needed"
@@ -287,6 +320,7 @@ def _parse_source(source, name, allowed) -> Expression:
     terms = tuple(tree.elts) if isinstance(tree, ast.Tuple) else (tree,)
     if not terms:
         raise ExpressionError(f"in {name} = {_shown(source)}: empty tuple")
+    terms = tuple(_balanced(term) for term in terms)
     for term in terms:
         _check(term, source, name, allowed)
     used = frozenset(n.id for term in terms for n in ast.walk(term)

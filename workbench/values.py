@@ -121,6 +121,9 @@ class Param:
         if self.kind == "int":
             if value != int(value):
                 raise ParameterError(f"{name} = {value} must be an integer; allowed: {self.range_text()}")
+            if abs(value) > INT_LIMIT:  # (an archive stores it as a 32-bit attribute; 1e308 steps is a slip)
+                raise ParameterError(f"{name} = {_fmt(value)} is outside the allowed range {self.range_text()} "
+                                     f"(and at most {INT_LIMIT})")
             value = int(value)
         lo, hi = self.lower, self.upper
         bad_lo = lo is not None and (value <= lo if self.lower_open else value < lo)
@@ -128,6 +131,10 @@ class Param:
         if bad_lo or bad_hi:
             raise ParameterError(f"{name} = {_fmt(value)} is outside the allowed range {self.range_text()}")
         return value
+
+
+#: The largest integer parameter (the largest 32-bit integer: archives store integers so).
+INT_LIMIT = 2**31 - 1
 
 
 def _fmt(v) -> str:

@@ -25,6 +25,7 @@ Examples
 from __future__ import annotations
 
 import functools
+import math
 from typing import TYPE_CHECKING
 
 from ..errors import ParameterError
@@ -107,6 +108,18 @@ class Geometry:
         for n in self.cells():
             count *= n + 1
         return count
+
+    @property
+    def size_names(self) -> tuple:
+        """The parameters that set how many cells the mesh has (named when a mesh would be too fine)."""
+        return self.extent_names + ("h",) + self.cell_names
+
+    def estimated_vertices(self) -> float:
+        """The vertices the mesh would have, from the numbers alone (no meshing; inf for an overflowing count)."""
+        count = 1.0
+        for n, e in zip(self.requested_cells, self.extent):
+            count *= (n if n > 0 else e / self.h) + 1.0
+        return count if math.isfinite(count) else math.inf
 
     def band_cells(self) -> int:
         """Cells across the body's shorter side (sets the bandwidth of a banded factorisation)."""
@@ -326,6 +339,11 @@ class MeshBody(Geometry):
     def vertex_count(self):
         return len(self._xyz)
 
+    size_names = ("mesh",)
+
+    def estimated_vertices(self):
+        return float(len(self._xyz))
+
     def band_cells(self):
         return max(1, round(len(self._xyz) ** (1.0 / self.dim)))
 
@@ -424,6 +442,14 @@ class _Indenter(Geometry):
 
     def vertex_count(self):
         return len(self._netgen().Points())
+
+    size_names = ("radius", "h", "h_contact")
+
+    def estimated_vertices(self):
+        """The body at h, the contact zone's side at h_contact and the body beneath it at ZONE_FACTOR h_contact."""
+        R, zone, d = self.extent[0], self.zone_radius, self.dim
+        count = (R / self.h) ** d + (zone / self.h_contact) ** (d - 1) + (zone / (ZONE_FACTOR * self.h_contact)) ** d
+        return count if math.isfinite(count) else math.inf
 
     def band_cells(self):
         return max(1, round(self.vertex_count() ** (1.0 / self.dim)))

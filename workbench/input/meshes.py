@@ -61,6 +61,8 @@ def check_file(path, name: str = "mesh") -> Path:
         raise ParameterError(f"{name} = {str(path)!r}: no such file")
     if p.is_dir():
         raise ParameterError(f"{name} = {str(path)!r} is a directory, not a mesh file")
+    if not p.resolve().is_file():  # (a pipe would wait for ever, /dev/zero fill memory)
+        raise ParameterError(f"{name} = {str(path)!r} is not a regular file (a device, a pipe or a socket)")
     if not any(p.name.endswith(s) for s in SUFFIXES):
         raise ParameterError(f"{name} = {str(path)!r}: unknown mesh format; give a gmsh .msh or a netgen .vol/.vol.gz "
                              "file (in Python also a netgen/OCC geometry or a mesh object)")
@@ -72,17 +74,47 @@ def read(path):
     p = check_file(path)
     try:
         if p.name.endswith(".msh"):
-            return _from_gmsh(p)
-        import netgen.meshing as nm
+            m = _from_gmsh(p)
+        else:
+            import netgen.meshing as nm
 
-        m = nm.Mesh()
-        m.Load(str(p))
+            m = nm.Mesh()
+            m.Load(str(p))
+        _check_cells(m, p)
         return m
     except ParameterError:
         raise
     except Exception as err:  # any failure of the readers: not a mesh we can use
         raise ParameterError(f"mesh = {str(path)!r} cannot be read as a mesh ({type(err).__name__}: "
                              f"{str(err).splitlines()[0][:100] if str(err) else 'no detail'})") from None
+
+
+def _check_cells(m, path) -> None:
+    """Refuse a mesh no run can use: no cells, a coordinate that is not finite, a vertex no cell uses, two vertices at
+    one place, a cell without volume (all its vertices on a line or a plane)."""
+    import numpy as np
+
+    label = f"mesh = {str(path)!r}"
+    dim = m.dim
+    xyz = np.array(m.Coordinates()).reshape(-1, m.dim) if len(m.Points()) else np.zeros((0, dim))
+    cells = {1: m.Elements1D, 2: m.Elements2D, 3: m.Elements3D}[dim]().NumPy()
+    nodes = np.asarray(cells["nodes"][:, : dim + 1], dtype=np.int64) - 1 if len(cells) else np.zeros((0, dim + 1),
+                                                                                                     dtype=np.int64)
+    if not len(nodes):
+        raise ParameterError(f"{label}: the file holds no {dim}D cells (an empty or damaged mesh)")
+    if not np.all(np.isfinite(xyz)):
+        raise ParameterError(f"{label}: a vertex coordinate is not finite (NaN or inf)")
+    unused = len(xyz) - len(np.unique(nodes))
+    if unused:
+        raise ParameterError(f"{label}: {unused} vertices belong to no cell; remove them from the file")
+    size = float(np.ptp(xyz, axis=0).max()) or 1.0
+    if len(np.unique(np.round(xyz / (1e-12 * size)), axis=0)) < len(xyz):
+        raise ParameterError(f"{label}: two vertices lie at the same place (duplicated nodes); merge them")
+    edges = xyz[nodes[:, 1:]] - xyz[nodes[:, :1]]
+    measure = np.abs(np.linalg.det(edges)) if dim > 1 else np.abs(edges[:, 0, 0])
+    if measure.min() <= 1e-12 * size ** dim:
+        raise ParameterError(f"{label}: {int(np.sum(measure <= 1e-12 * size ** dim))} cell(s) have no "
+                             f"{('length', 'area', 'volume')[dim - 1]} (their vertices on a line or a plane)")
 
 
 def boundary_names(mesh) -> set:

@@ -135,7 +135,7 @@ def _kelvin_voigt_of_tau(v):
 
 
 _TAU = {"tau": Param("tau", 0.05, "s", "Kelvin-Voigt relaxation time: the viscous tensor is tau times the elastic one "
-                     "(sets a1, a2 unless they are given)", lower=0.0)}
+                     "(sets a1, a2 unless they are given)", lower=0.0, lower_open=True)}
 _MESH_A = dict(k=0.01, T=1.0, scheme="implicit", adhesion=False, c_nu=1e4, snapshots=(0.5, 1.0))
 _MESH_B = dict(k=0.25, T=1.0, scheme="vi", gap=0.0, F=0.0, c=0.0, snapshots=(0.5, 1.0))
 _HERTZ_A = dict(radius=1.0, h=0.1, E=1000.0, nu=0.3, plane="strain", contact=True, adhesion=False, c_nu=1e5,
@@ -301,16 +301,26 @@ def make(name: str, overrides: dict | None = None, *, base: str | None = None, d
         if key not in known:
             raise ParameterError(f"unknown parameter {key!r} for scene {name!r}" + closest_name(key, known))
     raw = {n: p.default for n, p in known.items()} | preset.values | overrides
+    derived, inputs = {}, []
     if preset.derive is not None:
         inputs = [n for n in known if n in preset.extras or n in ("E", "nu", "plane")]
         checked_extras = {n: known[n].check(raw[n]) for n in inputs}
-        derived = preset.derive(checked_extras)
-        raw |= {k: v for k, v in derived.items() if k not in overrides}
+        derived = {k: v for k, v in preset.derive(checked_extras).items() if k not in overrides}
+        raw |= derived
     geometry = GEOMETRIES[preset.geometry]
     if "mesh" in known:
-        _mesh_values(raw, overrides)
-    values = {n: known[n].check(raw[n], size=geometry.dim) for n in known}
+        _mesh_values(raw, overrides, geometry.dim, name)
+    values = {}
+    for n in known:
+        try:
+            values[n] = known[n].check(raw[n], size=geometry.dim)
+        except ParameterError as err:
+            if n not in derived:
+                raise
+            given = ", ".join(f"{i} = {raw[i]}" for i in inputs if i in overrides) or "the preset's values"
+            raise ParameterError(f"{given}: the derived {err}") from None  # (what the user typed, and what follows)
     body = geometry.from_values(values)
+    _check_size(body, values)
     if "mesh" in known:  # a mesh body's element size is its mesh's
         if "h" in overrides and not math.isclose(float(overrides["h"]), body.h_max(), rel_tol=1e-9):
             raise ParameterError(f"h = {overrides['h']}: a mesh body's element size is its mesh's (h = "
@@ -330,7 +340,7 @@ def make(name: str, overrides: dict | None = None, *, base: str | None = None, d
     return Scene(name, preset.geometry, values, description or preset.description, user, base, preset.model, source)
 
 
-def _mesh_values(raw: dict, overrides: dict) -> None:
+def _mesh_values(raw: dict, overrides: dict, dim: int, name: str) -> None:
     """The mesh file of a mesh body, checked: its absolute path and the digest of its content (``mesh_digest``; one
     given, as by a restart or an archive, must still be the file's)."""
     from . import meshes
@@ -344,10 +354,30 @@ def _mesh_values(raw: dict, overrides: dict) -> None:
         raise ParameterError(f"mesh = {str(path)!r}: the file has changed since this scene was made (mesh_digest "
                              f"{raw['mesh_digest'][:12]}... then, {found[:12]}... now)")
     raw["mesh"], raw["mesh_digest"] = str(path), found
+    from .geometry import _read_mesh
+
+    have = _read_mesh(str(path), found).dim
+    if have != dim:
+        other = {2: "mesh2d / memory_mesh2d", 3: "mesh3d / memory_mesh3d"}.get(have, "none")
+        raise ParameterError(f"mesh = {str(path)!r} is a {have}D mesh; this scene needs a {dim}D one ({name!r}; the "
+                             f"scenes for a {have}D mesh: {other}; workbench.scene(mesh=...) picks by the dimension)")
 
 
-#: Above this many time steps a run is refused (a typing slip such as k = 1e-300 or T = 1e9).
-MAX_STEPS = 10**8
+#: Above this many time steps a run is refused (a typing slip such as k = 1e-300 or T = 1e6).
+MAX_STEPS = 10**7
+#: Above this many mesh vertices a scene is refused before meshing (a typing slip such as h = 1e-7: the mesher alone
+#: would run for hours; the largest run measured here, the P2 block at 1.19M dofs, has 50k vertices).
+MAX_VERTICES = 5e6
+
+
+def _check_size(body, values) -> None:
+    """Refuse, before any meshing, a mesh far finer than any run here (named by the parameters that set it)."""
+    n = body.estimated_vertices()
+    if n > MAX_VERTICES:
+        given = ", ".join(f"{name} = {values[name]:g}" for name in body.size_names
+                          if isinstance(values.get(name), (int, float)) and values.get(name))
+        raise ParameterError(f"{given or 'the mesh'} would give about {n:.2g} mesh vertices, more than the "
+                             f"{MAX_VERTICES:.0e} this workbench runs (a slip of a digit?); use a coarser mesh")
 
 
 def _check_consistency(name, body, v, model="A"):
@@ -385,7 +415,7 @@ def _check_consistency(name, body, v, model="A"):
     if steps > MAX_STEPS:
         raise ParameterError(f"k = {v['k']:g} and T = {v['T']:g} make {steps:.3g} time steps; at most {MAX_STEPS:.0e} "
                              "are allowed (check the values of k and T)")
-    if v["h"] > body.size:
+    if v["h"] > body.size and "mesh" not in v:  # (a mesh body's h is its longest cell edge: a diagonal may exceed it)
         raise ParameterError(f"h = {v['h']:g} is larger than the body ({body.size:g}); "
                              f"allowed: 0 < h <= {body.size:g}")
     for key in ("probes", "point_force_at"):
@@ -429,7 +459,7 @@ def _check_expressions(body, v):
             try:
                 with np.errstate(all="ignore"):
                     value = np.asarray(expr(t=t, **coords), dtype=float)
-            except (ZeroDivisionError, OverflowError, ValueError, FloatingPointError):
+            except (ZeroDivisionError, OverflowError, ValueError, FloatingPointError, TypeError):
                 value = np.array([np.nan])
             if not np.all(np.isfinite(value)):
                 where = f"t = {t:g}" + ("" if not expr.variables & {"x", "y", "z"} else " somewhere in the body")
@@ -458,6 +488,9 @@ def _check_memory(body, v):
         raise ParameterError(f"kernel = {v['kernel']} has no effect with kernel_E = 0: give kernel_E, the modulus "
                              "of the kernel tensor (negative for relaxation)")
 
+
+#: The largest scene file read (a scene is a few lines of TOML).
+MAX_SCENE_FILE = 1e6
 
 _TOML_KEYS = {"scene", "name", "description", "parameters", "traction", "geometry", "boundaries", "model"}
 
@@ -508,6 +541,11 @@ def from_toml(path, overrides: dict | None = None) -> Scene:
 def _read_toml(path: Path) -> dict:
     """The table of a scene file; a file that is missing, unreadable or not TOML is a ParameterError naming it."""
     label = str(path)
+    if path.exists() and not path.is_file() and not path.is_dir():  # (a pipe would wait for ever, /dev/zero fill memory)
+        raise ParameterError(f"scene file {label!r} is not a regular file (a device, a pipe or a socket)")
+    if path.is_file() and path.stat().st_size > MAX_SCENE_FILE:
+        raise ParameterError(f"scene file {label!r} is {path.stat().st_size / 1e6:.3g} MB long; a scene file is a "
+                             f"short TOML text (at most {MAX_SCENE_FILE / 1e6:g} MB)")
     try:
         raw = path.read_bytes()
     except FileNotFoundError:
@@ -522,6 +560,8 @@ def _read_toml(path: Path) -> dict:
         raise ParameterError(f"scene file {label!r} is not a text (UTF-8 TOML) file") from None
     except tomllib.TOMLDecodeError as err:
         raise ParameterError(f"scene file {label!r}: {err}") from None
+    except RecursionError:
+        raise ParameterError(f"scene file {label!r}: its tables or lists are nested too deeply") from None
 
 
 def _toml_values(path: Path, data: dict, base: str) -> dict:

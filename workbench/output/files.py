@@ -19,6 +19,7 @@ Examples
 """
 from __future__ import annotations
 
+import errno
 import os
 import re
 import secrets
@@ -82,15 +83,29 @@ def remove_stale_temporaries(path: Path) -> list:
 
 
 def atomic_write(path, writer) -> Path:
-    """Write ``path`` atomically: ``writer(tmp_path)`` fills a temporary file that is then renamed."""
+    """Write ``path`` atomically: ``writer(tmp_path)`` fills a temporary file that is then renamed.
+
+    Never replaces what is not a regular file (a device, a pipe, a socket: the rename would put a file in its
+    place) and raises OSError naming ``path`` for any failure, also a library's that is not an OSError (netCDF
+    reports a full disk as RuntimeError)."""
     path = Path(path)
-    path.parent.mkdir(parents=True, exist_ok=True)
+    if path.exists() and not path.is_file() and not path.is_dir():
+        raise OSError(errno.EEXIST, "it exists and is not a regular file (a device, a pipe or a socket): it is not "
+                                    "replaced", str(path))
+    try:
+        path.parent.mkdir(parents=True, exist_ok=True)
+    except OSError as err:
+        raise OSError(err.errno, f"its folder cannot be made ({err.strerror or err})", str(path)) from None
     remove_stale_temporaries(path)
     tmp = path.parent / f".{path.name}.{os.getpid()}.{secrets.token_hex(4)}.tmp"
     try:
         writer(tmp)
         os.chmod(tmp, 0o666 & ~_umask())
         os.replace(tmp, path)
+    except (OSError, RuntimeError, ValueError) as err:  # (netCDF4: RuntimeError "NetCDF: HDF error" on a full disk)
+        tmp.unlink(missing_ok=True)
+        reason = getattr(err, "strerror", None) or (str(err).splitlines()[0] if str(err) else type(err).__name__)
+        raise OSError(getattr(err, "errno", None) or errno.EIO, reason, str(path)) from None
     except BaseException:
         tmp.unlink(missing_ok=True)
         raise
@@ -100,7 +115,16 @@ def atomic_write(path, writer) -> Path:
 def check_output(path, option: str, *, folder: bool = False) -> Path:
     """Refuse, before any work, an output path that cannot be written: an existing directory where a file is
     meant (or a file where a folder is meant), a parent that is a file, a folder without write permission."""
+    if str(path).strip() == "":
+        raise ParameterError(f"{option} '': give a {'folder' if folder else 'file'} name")
     path = Path(path)
+    longest = max((len(part.encode()) for part in path.parts), default=0)
+    if longest > 255:
+        raise ParameterError(f"{option} {str(path)[:60]!r}...: a name in it is {longest} bytes long, more than the 255 "
+                             "a file system allows")
+    if path.exists() and not path.is_file() and not path.is_dir():
+        raise ParameterError(f"{option} {str(path)!r} exists and is not a regular file (a device, a pipe or a socket); "
+                             "give a file name")
     if folder:
         if path.exists() and not path.is_dir():
             raise ParameterError(f"{option} {str(path)!r} is a file; give a folder for the files")
@@ -116,9 +140,18 @@ def check_output(path, option: str, *, folder: bool = False) -> Path:
         existing = existing.parent
     if existing.exists() and not existing.is_dir():
         raise ParameterError(f"{option} {str(path)!r}: {str(existing)!r} is a file, not a folder")
-    if existing.exists() and not os.access(existing, os.W_OK | os.X_OK):
+    if existing.exists() and (not os.access(existing, os.W_OK | os.X_OK) or _virtual(existing)):
         raise ParameterError(f"{option} {str(path)!r}: no permission to write in {str(existing)!r}")
     return path
+
+
+def _virtual(folder: Path) -> bool:
+    """Whether ``folder`` is on a kernel's virtual file system (/proc, /sys), where no file can be made even as root."""
+    try:
+        resolved = folder.resolve()
+    except OSError:
+        return False
+    return resolved.parts[1:2] in (("proc",), ("sys",))
 
 
 def safe_name(name: str) -> str:

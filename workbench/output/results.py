@@ -27,6 +27,7 @@ from __future__ import annotations
 
 import contextvars
 import json
+import os
 import time as _time
 from datetime import datetime, timezone
 from pathlib import Path
@@ -388,9 +389,15 @@ def provenance(scene, extra: dict, call: str = "", terms=None) -> dict:
 
 
 def write(ds: xr.Dataset, path) -> Path:
-    """Write ``ds`` to netCDF atomically (:func:`workbench.output.files.atomic_write`)."""
+    """Write ``ds`` to netCDF atomically (:func:`workbench.output.files.atomic_write`); OSError naming ``path`` when it
+    cannot be written (a full disk, a folder without permission, a device)."""
+    from ..errors import ParameterError
     from .files import atomic_write
 
+    if not isinstance(ds, xr.Dataset):
+        raise ParameterError(f"workbench.write: give the xarray Dataset of a run or a study, got {type(ds).__name__}")
+    if not isinstance(path, (str, os.PathLike)) or not str(path).strip():
+        raise ParameterError(f"workbench.write: path = {path!r}: give a file name")
     return atomic_write(path, lambda tmp: ds.to_netcdf(tmp, engine="netcdf4"))
 
 
@@ -404,8 +411,17 @@ def load(path) -> xr.Dataset:
     >>> p = write(ds, tempfile.mkdtemp() + "/tp1.nc")
     >>> xr.testing.assert_identical(load(p), ds)
     """
-    with xr.open_dataset(path, engine="netcdf4", decode_times=False, decode_timedelta=False) as ds:
-        return ds.load()
+    from ..errors import ParameterError
+
+    if not isinstance(path, (str, os.PathLike)) or not Path(path).is_file():
+        raise ParameterError(f"workbench.load: {path!r} is not an archive file" +
+                             (" (no such file)" if isinstance(path, (str, os.PathLike)) else ""))
+    try:
+        with xr.open_dataset(path, engine="netcdf4", decode_times=False, decode_timedelta=False) as ds:
+            return ds.load()
+    except (OSError, ValueError, RuntimeError) as err:
+        raise ParameterError(f"workbench.load: {str(path)!r} cannot be read as a netCDF archive ({type(err).__name__})") \
+            from None
 
 
 class Clock:

@@ -234,9 +234,31 @@ def read(path):
                              "start")
     try:
         state = decode(ds)
+        _check_consistent(ds, state)
     except NoRestartState as err:
         raise NoRestartState(f"restart {str(path)!r}: {err}; run it again from the start") from None
+    except Exception as err:  # noqa: BLE001 (an edited or truncated archive: any fault means it cannot be continued)
+        raise NoRestartState(f"restart {str(path)!r}: the archive's restart state is damaged ({type(err).__name__}: "
+                             f"{str(err).splitlines()[0][:80] if str(err) else 'no detail'}); run it again from the "
+                             "start") from None
     return ds, state
+
+
+def _check_consistent(ds: xr.Dataset, state: dict) -> None:
+    """The parts of an archive a continuation reads, checked against each other (an edited archive fails here)."""
+    a = ds.attrs
+    for key in ("scene", "base_scene", "parameters_json"):
+        if not isinstance(a.get(key), str):
+            raise NoRestartState(f"the archive has no {key} attribute (text)")
+    if not isinstance(json.loads(a["parameters_json"]), dict):
+        raise NoRestartState("the archive's parameters_json is not a table of values")
+    s = state["scheme"]
+    if s["u"].shape != (state["ndof"],) or s["v"].shape != (state["ndof"],):
+        raise NoRestartState(f"the archive's state holds {s['u'].size} displacement dofs, its record says "
+                             f"{state['ndof']}")
+    for key in ("time", "steps", "recorder"):
+        if key not in state or (key != "time" and not isinstance(state[key], dict)):
+            raise NoRestartState(f"the archive's restart state has no {key}")
 
 
 def archived_scene(ds: xr.Dataset, *, whole: bool = False, **overrides):

@@ -11,6 +11,7 @@ from __future__ import annotations
 
 import contextlib
 import inspect
+import os
 import warnings
 from pathlib import PurePath
 
@@ -82,6 +83,7 @@ def run(scene=None, *, restart=None, checkpoint=None, progress=None, record_time
         the steps computed before, marked ``status = "incomplete"``.
     """
     _check_options(overrides, checkpoint, limit, threads)
+    _check_objects(record_times=record_times, times=times, model=model, restart=restart)
     sc, resume = _scene_and_archive(scene, restart, overrides, model)
     if sc["checkpoint_every"] and checkpoint is None:
         raise ParameterError(f"checkpoint_every = {sc['checkpoint_every']} needs a file to write the checkpoints to: "
@@ -110,11 +112,15 @@ def _check_options(overrides: dict, checkpoint, limit, threads) -> None:
     if checkpoint is not None:
         from ..output.files import check_output
 
+        if not isinstance(checkpoint, (str, PurePath)):
+            raise ParameterError(f"checkpoint = {checkpoint!r}: give the path of a file")
+
         check_output(checkpoint, "checkpoint")
     if limit is not None and (isinstance(limit, bool) or not isinstance(limit, (int, float)) or not limit > 0):
         raise ParameterError(f"limit = {limit!r}: give the displacement bound in m, a number > 0")
-    if threads is not None and (isinstance(threads, bool) or not isinstance(threads, int) or threads < 1):
-        raise ParameterError(f"threads = {threads!r}: give an integer >= 1 (NGSolve TaskManager threads)")
+    if threads is not None and (isinstance(threads, bool) or not isinstance(threads, int) or not 1 <= threads <= 256):
+        raise ParameterError(f"threads = {threads!r}: give an integer from 1 to 256 (NGSolve TaskManager threads; this "
+                             f"machine has {os.cpu_count()} cores)")
 
 
 def _grid(sc, numerics, times, record_times, resume):
@@ -127,6 +133,61 @@ def _grid(sc, numerics, times, record_times, resume):
     if resume is not None and not numerics.adaptive:
         restarts.check_grid(resume.path, grid, resume.state, resume.archive)
     return grid, sync
+
+
+def _check_objects(record_times, times, model, restart) -> None:
+    """The options of :func:`run` that take Python objects: of the kind they must be, before any work."""
+    from ..input.models import MODELS
+
+    for name, value in (("record_times", record_times), ("times", times)):
+        if value is None:
+            continue
+        try:
+            numbers = np.asarray(value, dtype=float)
+        except (TypeError, ValueError):
+            numbers = None
+        if numbers is None or numbers.ndim != 1 or not np.all(np.isfinite(numbers)):
+            raise ParameterError(f"{name} = {results.brief(value)}: give a sequence of finite times in s, e.g. "
+                                 f"{name}=[0.1, 0.5]")
+    if model is not None and not isinstance(model, tuple(MODELS.values())):
+        raise ParameterError(f"model = {model!r}: give the physics of a scene (workbench.scene(...).model_of(), with "
+                             "parts replaced), or leave it out")
+    if restart is not None and (not isinstance(restart, (str, PurePath)) or not str(restart).strip()):
+        raise ParameterError(f"restart = {restart!r}: give the path of an archive")
+
+
+def _extremes(sc) -> list:
+    """'name = value' for the values the user gave that are extreme (beyond 1e12 or below 1e-12 in magnitude, or a
+    Poisson's ratio within 1e-4 of its limits): what a numerical failure of the setup comes from."""
+    out = []
+    for name in sorted(sc.set_by_user):
+        value = sc.values.get(name)
+        if isinstance(value, bool) or not isinstance(value, (int, float)):
+            continue
+        poisson = name.startswith("nu") and (value < -1 + 1e-4 or value > 0.5 - 1e-4)
+        if poisson or abs(value) > 1e12 or 0 < abs(value) < 1e-12:
+            out.append(f"{name} = {value:g}")
+    return out
+
+
+@contextlib.contextmanager
+def _naming_extremes(sc):
+    """Inside the setup: a numerical failure (a factorisation of a matrix that is not positive definite in floating
+    point, an eigenvalue iteration, an overflow) becomes a ParameterError naming the extreme values the user gave;
+    a refusal of the step (k_crit) names them too."""
+    from scipy.sparse.linalg import ArpackError
+
+    extremes = _extremes(sc)
+    try:
+        yield
+    except (np.linalg.LinAlgError, ArpackError, FloatingPointError, OverflowError, ZeroDivisionError) as err:
+        raise ParameterError(f"{sc.name}: the setup failed numerically ({type(err).__name__}: "
+                             f"{str(err).splitlines()[0][:80] if str(err) else ''}) with "
+                             f"{', '.join(extremes) or 'these values'}: check them") from None
+    except ParameterError as err:
+        if not extremes:
+            raise
+        raise type(err)(f"{err} (values given that are extreme: {', '.join(extremes)})") from None
 
 
 class _Resume:
@@ -146,7 +207,11 @@ def _scene_and_archive(scene, restart, overrides: dict, model):
     archive, state = restarts.read(restart)
     if "T" in overrides:  # (before the scene: the archive's snapshots after an earlier T would be refused first)
         restarts.check_time(restart, state, scenes.PARAMETERS["T"].check(overrides["T"]))
-    sc = scenes.scene(scene, **overrides) if scene is not None else restarts.archived_scene(archive, **overrides)
+    try:
+        sc = scenes.scene(scene, **overrides) if scene is not None else restarts.archived_scene(archive, **overrides)
+    except ParameterError as err:
+        raise restarts.NoRestartState(f"restart {str(restart)!r}: the archive's scene cannot be made again ({err})") \
+            from None
     restarts.check(restart, archive, state, sc, (model or sc.model_of()).terms)
     return sc, _Resume(archive, state, restart)
 
@@ -184,8 +249,8 @@ class _Run:
         """Set up, step from 0 (or the archive's time) to T, and return the Dataset (None on ranks other than 0);
         a run that diverges raises with the Dataset of what it computed."""
         sc, n = self.sc, self.numerics
-        with results.Clock() as setup, task_manager(n.threads):  # (threads: the factorisations use them too)
-            self.disc = disc = parallel.discretise(self.model, sc, n)
+        with results.Clock() as setup, task_manager(n.threads), _naming_extremes(sc):
+            self.disc = disc = parallel.discretise(self.model, sc, n)  # (threads: the factorisations use them too)
             self.scheme = scheme = scheme_class(n.scheme)(disc)
             if n.adaptive:
                 self.steps = AdaptiveSteps(sc["T"], n.k, rtol=n.rtol, atol=n.atol, k_min=n.k_min, k_max=n.largest_step,

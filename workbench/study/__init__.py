@@ -15,6 +15,7 @@ Examples
 """
 from __future__ import annotations
 
+import os
 import tempfile
 import time
 import warnings
@@ -74,6 +75,7 @@ class Study:
 
     def __init__(self, scene, *, h=None, k=None, k_over_h=None, order=None, scheme=None, sweep=None, grids=None,
                  couple=None, reference="finest", measures=None, n_compare=10, workers=2, client=None, **overrides):
+        _check_arguments(sweep=sweep, grids=grids, couple=couple, measures=measures, client=client)
         base = {name: value for name, value in (("h", h), ("k", k), ("order", order), ("scheme", scheme))
                 if value is not None}
         for name in sweep or {}:
@@ -181,6 +183,12 @@ class Study:
         from tqdm.auto import tqdm
 
         record, compare = self._times()
+        if archive is not None:
+            from ..output.files import check_output
+
+            if not isinstance(archive, (str, os.PathLike)):
+                raise ParameterError(f"Study.run: archive = {archive!r}: give a folder for the case archives")
+            check_output(archive, "Study.run: archive", folder=True)
         archive = Path(archive) if archive is not None else Path(tempfile.mkdtemp(prefix="workbench-study-"))
         archive.mkdir(parents=True, exist_ok=True)
         todo = list(dict.fromkeys(self.listed + (self.reference.cases() if self.reference else [])))
@@ -251,7 +259,9 @@ class Study:
         """
         ds = self.dataset
         if ds is None:
-            raise RuntimeError("run the study first")
+            raise ParameterError("Study.assert_order: run the study first (Study.run)")
+        if norm not in ds.norm.values:
+            raise ParameterError(f"Study.assert_order: norm = {norm!r}; the study has {', '.join(map(str, ds.norm.values))}")
         along = along or ("h+k" if self.layout.refining else ("h" if len(self.hs) > 1 else "k"))
         if selection:
             ds = ds.sel(selection)
@@ -269,6 +279,8 @@ class Study:
 
     def cheapest(self, tolerance: float, *, error: str = "error", cost: str = "wall_time"):
         """The cheapest case whose ``error`` is <= ``tolerance`` (None if none reaches it)."""
+        if self.dataset is None:
+            raise ParameterError("Study.cheapest: run the study first (Study.run)")
         return cheapest(self.dataset, tolerance, error=error, cost=cost)
 
 
@@ -311,12 +323,43 @@ def _history(study) -> str:
     return f"{stamp} {invocation.get() or f'workbench.Study({study.scene.name!r}, {axes})'}"
 
 
+def _check_arguments(*, sweep, grids, couple, measures, client) -> None:
+    """The Study's arguments that take Python objects: of the kind they must be, before any work (a parameter's name
+    and values are checked against the scene by :func:`.cases.expand`)."""
+    from ..input.parameters import PARAMETERS
+    from ..values import closest_name
+
+    for what, table in (("sweep", sweep), ("couple", couple)):
+        if table is not None and not isinstance(table, dict):
+            raise ParameterError(f"{what} = {table!r}: give a dict of parameter names to "
+                                 + ("lists of values" if what == "sweep" else "functions of a case's values"))
+        for name in table or {}:
+            if name not in PARAMETERS:
+                raise ParameterError(f"{what}: {name!r} is not a parameter" + closest_name(str(name), PARAMETERS))
+    for name, rule in (couple or {}).items():
+        if not callable(rule):
+            raise ParameterError(f"couple: {name} = {rule!r} is not a function of a case's values")
+    if grids is not None and (not isinstance(grids, (list, tuple)) or not grids
+                              or not all(isinstance(g, dict) for g in grids)):
+        raise ParameterError(f"grids = {grids!r}: give a non-empty list of dicts (axis -> values), one per grid")
+    if measures is not None and not callable(measures):
+        raise ParameterError(f"measures = {measures!r}: give a function of a case's Dataset returning a dict of numbers")
+    if isinstance(client, (int, float, bool)):
+        raise ParameterError(f"client = {client!r}: give a dask.distributed Client or a scheduler address")
+
+
 def _reference(spec, study):
     return reference.make(spec, study.scene, study.cases, study.axes)
 
 
 def cheapest(ds: xr.Dataset, tolerance: float, *, error: str = "error", cost: str = "wall_time"):
     """The cheapest case of a study Dataset with ``ds[error] <= tolerance``, as a dict."""
+    for name in (error, cost):
+        if name not in ds:
+            raise ParameterError(f"cheapest: {name!r} is not a variable of the study (errors: "
+                                 f"{', '.join(n for n in ds.data_vars if str(n).startswith('error'))})")
+    if isinstance(tolerance, bool) or not isinstance(tolerance, (int, float)):
+        raise ParameterError(f"cheapest: tolerance = {tolerance!r}: give a number")
     err = ds[error]
     c = ds[cost] + (ds["setup_time"] if cost == "wall_time" else 0)
     ok = (err <= tolerance) & np.isfinite(c)

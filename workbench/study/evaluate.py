@@ -276,12 +276,12 @@ def study_dataset(study, runs: dict, compare, history: str) -> xr.Dataset:
             methods.add(err.pop("transfer", "same mesh / exact solution"))
             row |= err
         if study.measures is not None:
-            values = {n: float(v) for n, v in study.measures(ds).items()}
+            values = _measured(study.measures, ds)
             row |= values
             if ref is not None and ref.kind == "run":
                 rc = ref.of(case)
                 if rc not in ref_measures:
-                    ref_measures[rc] = {n: float(v) for n, v in study.measures(runs[rc]).items()}
+                    ref_measures[rc] = _measured(study.measures, runs[rc])
                 for n, v in values.items():
                     r = ref_measures[rc][n]
                     row[f"rel_error_{n}"] = abs(v - r) / abs(r) if r != 0 else np.nan
@@ -313,3 +313,21 @@ def study_dataset(study, runs: dict, compare, history: str) -> xr.Dataset:
         "history": history,
     } | {k: attr_value(v) for k, v in study.scene.values.items() if k not in swept}
     return ds
+
+
+def _measured(measures, ds) -> dict:
+    """``measures(ds)`` as a dict of floats, or a ParameterError saying what it returned."""
+    from ..errors import ParameterError
+
+    got = measures(ds)
+    if not isinstance(got, dict):
+        raise ParameterError(f"measures returned {type(got).__name__} {str(got)[:40]!r}: return a dict of names to "
+                             "numbers")
+    out = {}
+    for name, value in got.items():
+        try:
+            out[str(name)] = float(value)
+        except (TypeError, ValueError):
+            raise ParameterError(f"measures returned {name} = {str(value)[:40]!r}: return a number for each name") \
+                from None
+    return out

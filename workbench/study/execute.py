@@ -193,7 +193,14 @@ def on_cluster(tasks, client):
     from distributed import as_completed as dask_completed
 
     if isinstance(client, str):
-        client = Client(client)
+        try:
+            client = Client(client, timeout=10)
+        except (OSError, ValueError, TypeError) as err:  # (unreachable, a malformed address, a wrong port)
+            from ..errors import ParameterError
+
+            raise ParameterError(f"--scheduler {client!r}: no dask.distributed scheduler answers there "
+                                 f"({type(err).__name__}: {str(err).splitlines()[0][:80] if str(err) else ''})") \
+                from None
     futures = {client.submit(run_case, *args, pure=False): case for case, args in tasks}
     for fut in dask_completed(futures):
         yield futures[fut], fut.result()

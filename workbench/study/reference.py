@@ -195,4 +195,8 @@ def make(spec, scene, cases, axes):
         for c in ref.cases():
             scene.with_(**c.values())  # checked before any work
         return ref
+    if not callable(spec) or not callable(getattr(type(spec), "stress", None)):
+        raise ParameterError(f"reference = {spec!r} ({type(spec).__name__}); allowed: 'finest', 'ode', 'exact', a dict "
+                             "of discretisation values such as {'h': 0.005, 'k': 0.0005}, or a solution object "
+                             "(solution(t, x) -> (u, beta) with a method stress(t))")
     return SolutionReference(lambda _scene: spec, describe=type(spec).__name__)
