@@ -11,6 +11,15 @@ import pytest
 CHILD = "WORKBENCH_TEST_MPI_CHILD"
 
 
+def pytest_configure(config):
+    """The suite keeps its meshes out of the user's home (~/.cache/workbench): in a folder of its own, also for the
+    subprocesses it starts (they inherit the variable)."""
+    if not os.environ.get("WORKBENCH_CACHE"):
+        import tempfile
+
+        os.environ["WORKBENCH_CACHE"] = tempfile.mkdtemp(prefix="workbench-test-cache-")
+
+
 def observed_order(sizes, errors):
     """Least-squares slope of log(error) against log(size)."""
     return float(np.polyfit(np.log(sizes), np.log(errors), 1)[0])

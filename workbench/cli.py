@@ -188,11 +188,20 @@ def cmd_show(args) -> int:
     sc = scene(args.scene, **_overrides(args))
     print(f"{sc.name} ({sc.geometry}, {sc.dim}D, Model {sc.model}): {sc.description}")
     print(f"terms assembled on the contact boundary: {', '.join(sc.terms) or 'none'}\n")
+    import shutil
+    import textwrap
+
+    width = max(100, shutil.get_terminal_size((120, 24)).columns)
+    limits = (18, 28, 10, 26)  # (a long value or range wraps in its column instead of widening the table)
     rows = [(n, str(v), u, r, m) for n, v, u, r, m in sc.table()]
-    w = [max(len(r[i]) for r in rows) for i in range(4)]
+    w = [min(limits[i], max(len(r[i]) for r in rows + [("parameter", "value", "unit", "allowed", "")])) for i in range(4)]
+    meaning = max(30, width - sum(w) - 8)
     print(f"{'parameter':<{w[0]}}  {'value':<{w[1]}}  {'unit':<{w[2]}}  {'allowed':<{w[3]}}  meaning")
     for r in rows:
-        print(f"{r[0]:<{w[0]}}  {r[1]:<{w[1]}}  {r[2]:<{w[2]}}  {r[3]:<{w[3]}}  {r[4]}")
+        cells = [textwrap.wrap(r[i], w[i]) or [""] for i in range(4)] + [textwrap.wrap(r[4], meaning) or [""]]
+        for j in range(max(map(len, cells))):
+            line = "  ".join(f"{(c[j] if j < len(c) else ''):<{w[i]}}" for i, c in enumerate(cells[:4]))
+            print(f"{line}  {cells[4][j] if j < len(cells[4]) else ''}".rstrip())
     return 0
 
 
@@ -207,13 +216,19 @@ def _status_line(ds) -> str:
 
 def cmd_run(args) -> int:
     from .errors import Diverged
-    from .running.runner import run
 
     _check_outputs(args)
     overrides = _overrides(args)
     if args.scene is None and args.restart is None:
         raise ParameterError("give a scene (a built-in name or a .toml file), or --restart ARCHIVE to continue a run "
                              "(see: workbench run --help)")
+    _threads(args.threads)
+    if args.restart is None:  # the values checked first, before NGSolve and xarray load (0.2 s, not 0.9 s, a mistake)
+        from .input.scenes import scene
+
+        scene(args.scene, **overrides)
+    from .running.runner import run
+
     try:
         # -o is also where checkpoints go (checkpoint_every): a killed run goes on with the same command + --restart
         ds = run(args.scene, restart=args.restart, checkpoint=args.output,
@@ -289,6 +304,28 @@ def _reference(text):
     return out
 
 
+def _sweeps(items) -> dict:
+    """``--sweep NAME=V1,V2,...`` as {NAME: [V1, V2, ...]} (values as text: the parameter table reads them; a comma
+    inside parentheses belongs to a value, as in an expression ``(0, t)``)."""
+    out = {}
+    for item in items or []:
+        if "=" not in item:
+            raise ParameterError(f"--sweep {item!r}: write name=value1,value2, e.g. --sweep c_nu=1,100,1e4")
+        name, text = (s.strip() for s in item.split("=", 1))
+        if name in out:
+            raise ParameterError(f"--sweep {name} is given twice; give its values once")
+        values, depth, start = [], 0, 0
+        for i, ch in enumerate(text + ","):
+            depth += (ch in "([") - (ch in ")]")
+            if ch == "," and depth == 0:
+                values.append(text[start:i].strip())
+                start = i + 1
+        out[name] = [v for v in values if v]
+        if not out[name]:
+            raise ParameterError(f"--sweep {name}=: give at least one value")
+    return out
+
+
 def cmd_study(args) -> int:
     from pathlib import Path
 
@@ -299,10 +336,14 @@ def cmd_study(args) -> int:
     _check_outputs(args, cases=True)
     from .input.numerics import AXES as axes
 
-    overrides = _overrides(args, swept=axes)
+    sweep = _sweeps(args.sweep)
+    overrides = _overrides(args, swept=tuple(axes) + tuple(sweep))
+    for name in sweep:
+        if name in overrides or getattr(args, name, None) is not None:
+            raise ParameterError(f"{name} is given twice (--sweep {name}=... and as a value); give it once")
     given = {name: getattr(args, name) for name in axes if getattr(args, name) is not None}
     st = Study(args.scene, k_over_h=args.k_over_h, reference=_reference(args.reference), n_compare=args.compare,
-               workers=args.workers, client=args.scheduler, **given, **overrides)
+               workers=args.workers, client=args.scheduler, sweep=sweep or None, **given, **overrides)
     archive = Path(args.output + ".cases") if args.output else None
     ds = st.run(archive, progress=False if args.no_progress else None)
     code, kept = 0, None
@@ -376,11 +417,17 @@ def _add_scene_args(p, run_options=True, optional=False):
         p.add_argument("--k", type=float, help="time step")
         p.add_argument("--T", type=float, help="final time")
         p.add_argument("--order", type=int, help="polynomial order of the displacement")
-        p.add_argument("--scheme", help="time scheme")
+        from .input.numerics import SCHEMES
+
+        p.add_argument("--scheme", choices=tuple(SCHEMES), help="time scheme")
 
 
 def build_parser() -> argparse.ArgumentParser:
+    from . import __version__
+    from .input.numerics import SCHEMES
+
     parser = _Parser(prog="workbench", description=__doc__.split("\n")[0])
+    parser.add_argument("--version", action="version", version=f"workbench {__version__}")
     sub = parser.add_subparsers(dest="command", required=True, parser_class=_Parser)
     p = sub.add_parser("scenes", help="list the built-in scenes")
     p.set_defaults(func=cmd_scenes)
@@ -405,7 +452,9 @@ def build_parser() -> argparse.ArgumentParser:
     p.add_argument("--k", type=float, nargs="+", help="time steps (all combinations with --h)")
     p.add_argument("--k-over-h", type=float, help="couple k = C h instead of --k")
     p.add_argument("--order", type=int, nargs="+", help="element orders")
-    p.add_argument("--scheme", nargs="+", help="schemes (explicit, implicit)")
+    p.add_argument("--scheme", nargs="+", choices=tuple(SCHEMES), help="schemes to sweep")
+    p.add_argument("--sweep", action="append", metavar="NAME=V1,V2,...",
+                   help="sweep any scene parameter over these values (repeatable), e.g. --sweep c_nu=1,100,1e4")
     p.add_argument("--reference", help="finest (default) | ode | exact | h=..,k=..[,order=..,scheme=..]")
     p.add_argument("--compare", type=int, default=10, help="number of common times at which fields are compared")
     p.add_argument("--workers", type=int, default=2, help="local worker processes (0: in this process)")
@@ -430,7 +479,7 @@ def build_parser() -> argparse.ArgumentParser:
 def main(argv=None) -> int:
     import shlex
 
-    from .output.results import invocation
+    from .output import invocation
 
     argv = sys.argv[1:] if argv is None else list(argv)
     token = None
@@ -470,6 +519,10 @@ def main(argv=None) -> int:
 def _one_case_per_launch(command: str) -> None:
     """Several MPI processes share one case (``workbench run``); a sweep or the reproduction would run whole on every
     rank: refused by name."""
+    from .discrete.world import launched
+
+    if launched() <= 1:  # (no launcher: NGSolve and MPI are not imported for this)
+        return
     from .parallel import world
 
     w = world()
@@ -481,6 +534,10 @@ def _one_case_per_launch(command: str) -> None:
 
 def _other_rank() -> bool:
     """Whether this process is one of several MPI ranks of a distributed run, and not rank 0 (:mod:`.parallel`)."""
+    from .discrete.world import launched
+
+    if launched() <= 1:
+        return False
     from .parallel import world
 
     return not world().root

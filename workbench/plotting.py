@@ -68,6 +68,8 @@ def overview(ds, path=None):
     times = np.unique(np.quantile(ds.time.values, [0.25, 0.5, 0.75, 1.0], method="nearest"))
     order = np.argsort(ds.node_x.values)
     x_nodes = ds.node_x.values[order]
+    # a 3D contact side is a surface: its vertices against x are a cloud, drawn as points (a line zig-zagged)
+    style = dict(ls="none", marker=".", ms=3) if "node_y" in ds.coords and "node_z" in ds.coords else {}
     for ax, panel in zip(axes[0], panels):
         if panel == "probes":
             for p in ds.probe.values:
@@ -82,14 +84,14 @@ def overview(ds, path=None):
             ax.set(xlabel="t [s]", ylabel="beta [1]", title=f"bonding field at x = {float(far.facet_x):.3g}")
         elif panel == "u_contact":
             for t in times:
-                ax.plot(x_nodes, ds.u_contact.sel(time=t, component=comp).values[order], label=f"t = {t:.3g}")
+                ax.plot(x_nodes, ds.u_contact.sel(time=t, component=comp).values[order], label=f"t = {t:.3g}", **style)
             if model_b:  # u_nu = -u_y (2D) / -u_z (3D) reaches the rigid layer at -gap
                 ax.axhline(-float(ds.attrs["gap"]), color="0.5", ls="--", lw=0.8, label="rigid limit")
             ax.set(xlabel="x [m]", ylabel=f"u_{comp} [m]", title="contact side")
             ax.legend(fontsize=7)
         elif panel == "pressure":
             for t in times:
-                ax.plot(x_nodes, ds.contact_pressure.sel(time=t).values[order], label=f"t = {t:.3g}")
+                ax.plot(x_nodes, ds.contact_pressure.sel(time=t).values[order], label=f"t = {t:.3g}", **style)
             ax.set(xlabel="x [m]", ylabel="contact pressure [Pa]", title="contact pressure")
             ax.legend(fontsize=7)
         elif panel == "states":

@@ -310,6 +310,8 @@ class MeshBody(Geometry):
                                  f"body must lie above the foundation {axis} = 0")
         self.curved = bool(xyz[on, self.normal_axis].max() > 1e-12 * self.size)
         self._contact_vertices = on
+        self._clamped_vertices = np.nonzero(np.array(p1.GetDofs(mesh.Boundaries(self.boundaries["clamp"])),
+                                                     dtype=bool))[0]
         self._xyz = xyz
         cells = {2: self._ngmesh.Elements2D, 3: self._ngmesh.Elements3D}[self.dim]().NumPy()
         nodes = np.asarray(cells["nodes"][:, : self.dim + 1], dtype=np.int64) - 1
@@ -348,11 +350,19 @@ class MeshBody(Geometry):
         return max(1, round(len(self._xyz) ** (1.0 / self.dim)))
 
     def default_probes(self):
-        """The lowest contact vertex (the first to touch) and the highest vertex of the body."""
-        on, axis = self._contact_vertices, self.normal_axis
-        low = on[int(self._xyz[on, axis].argmin())]
-        high = int(self._xyz[:, axis].argmax())
-        return tuple(tuple(float(c) for c in self._xyz[i]) for i in (low, high))
+        """The contact vertex that touches first (the lowest; of those, the farthest from the clamp) and the vertex of
+        the body farthest from the clamp (a cantilever's tip): probes on the clamp would record zeros."""
+        import numpy as np
+
+        xyz, axis = self._xyz, self.normal_axis
+        clamp = xyz[self._clamped_vertices]
+        far = np.min(np.linalg.norm(xyz[:, None, :] - clamp[None, ::max(1, len(clamp) // 200), :], axis=2), axis=1)
+        on = self._contact_vertices
+        lowest = xyz[on, axis] <= xyz[on, axis].min() + 1e-9 * self.size
+        low = on[lowest][int(far[on[lowest]].argmax())]
+        farthest = np.nonzero(far >= far.max() - 1e-9 * self.size)[0]
+        tip = int(farthest[xyz[farthest, axis].argmax()])  # (of those, the highest: the top of the tip)
+        return tuple(tuple(float(c) for c in xyz[i]) for i in dict.fromkeys((low, tip)))
 
     def mesh(self):
         import ngsolve as ngs

@@ -25,7 +25,6 @@ schema stores only str, int, float.
 """
 from __future__ import annotations
 
-import contextvars
 import json
 import os
 import time as _time
@@ -36,6 +35,7 @@ import numpy as np
 import xarray as xr
 
 from ..values import to_plain
+from . import invocation
 
 COMPONENTS = ("x", "y", "z")
 STRESS_COMPONENTS = {1: ("xx",), 2: ("xx", "yy", "xy"), 3: ("xx", "yy", "zz", "yz", "xz", "xy")}
@@ -336,8 +336,6 @@ def ugrid_topology(dim: int, connectivity: xr.Variable) -> xr.Variable:
     return xr.Variable((), np.int32(0), attrs=attrs)
 
 
-#: The command or call that is making the current result (set by the command line; else the Python call).
-invocation: contextvars.ContextVar = contextvars.ContextVar("invocation", default=None)
 
 
 def brief(value, head: int = 3, tail: int = 2) -> str:

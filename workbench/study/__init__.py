@@ -316,7 +316,8 @@ def _base_scene(scene, overrides, grid, couple):
 def _history(study) -> str:
     from datetime import datetime, timezone
 
-    from ..output.results import brief, invocation
+    from ..output import invocation
+    from ..output.results import brief
 
     stamp = datetime.now(timezone.utc).strftime("%Y-%m-%dT%H:%M:%SZ")
     axes = ", ".join(f"{k}={brief(v)}" for k, v in study.axes.items() if len(v) > 1)
