@@ -154,10 +154,16 @@ def test_limits(overrides):
 
 @pytest.mark.slow
 def test_memory_slab_coupled_refinement():
-    """Coupled k = 0.4 h against the finest case: order >= 0.9 in ||u - u_ref||_V (measured 0.91 over 5 levels)."""
-    st = Study("memory_slab", h=[0.2, 0.1, 0.05, 0.025], k_over_h=0.4, n_compare=4, workers=2)
+    """Coupled k = 0.4 h against the finest case: order >= 0.9 in ||u - u_ref||_V (measured 0.91 over 5 levels). The
+    finest case as the reference overstates the order (its own error is not small against the others'): the
+    extrapolated reference (the default here) measures 0.77 on the same cases, asserted >= 0.6 (docs/models.md)."""
+    st = Study("memory_slab", h=[0.2, 0.1, 0.05, 0.025], k_over_h=0.4, n_compare=4, workers=2, reference="finest")
     st.run(progress=False)
     st.assert_order(1.0, tol=0.1, norm="error_V", at_least=True)
+    extrapolated = Study("memory_slab", h=[0.2, 0.1, 0.05, 0.025], k_over_h=0.4, n_compare=4, workers=2)
+    extrapolated.run(progress=False)
+    assert extrapolated.dataset.attrs["reference"].startswith("auto: extrapolated")
+    extrapolated.assert_order(1.0, tol=0.4, norm="error_V", at_least=True)
 
 
 @pytest.mark.parametrize("overrides, message", [

@@ -59,7 +59,8 @@ def test_slab_coupled_sweep():
     P1 on this thin slab locks in bending and the clamped corners are singular, so its order is
     pre-asymptotic here (measured: paper norm 0.90, displacement part 0.86): asserted >= 0.8.
     """
-    st = Study("tp5", h=[0.05, 0.025, 0.0125, 0.00625], k_over_h=0.2, order=[1, 2], T=0.3, n_compare=5, workers=2)
+    st = Study("tp5", h=[0.05, 0.025, 0.0125, 0.00625], k_over_h=0.2, order=[1, 2], T=0.3, n_compare=5, workers=2,
+               reference="finest")
     ds = st.run(progress=False)
     rates = ds.observed_order.sel(along="h+k").squeeze("scheme")
     assert float(rates.sel(norm="error", order=2)) >= 0.9
@@ -268,11 +269,13 @@ def test_workers_exit_when_the_study_is_killed(tmp_path, sig):
 
 @pytest.mark.slow
 def test_single_case_study_is_refused():
-    """reference = 'finest' with one case: nothing to compare; refused before any work (it exited 0 with NaN)."""
+    """reference = 'finest' with one case: nothing to compare; refused before any work (it exited 0 with NaN). With
+    the default reference a single rod case is compared with the rod's own (exact) reference."""
     with pytest.raises(workbench.ParameterError, match="single case"):
-        Study("tp1", k=[0.01])
-    p = _cli("study", "tp1", "--k", "0.01")
+        Study("tp1", k=[0.01], reference="finest")
+    p = _cli("study", "tp1", "--k", "0.01", "--reference", "finest")
     assert p.returncode == 2 and p.stderr.startswith("error:")
+    assert Study("tp1", k=[0.01]).reference.kind == "solution"
 
 
 def test_study_axis_values_are_checked():
@@ -380,7 +383,7 @@ def test_overrides_are_checked_with_the_swept_values():
     overrides are checked with the axes applied, so the answer is the study's own (one case: nothing to compare), and
     two steps below T run. Overrides that no case can fix are still refused, naming the parameter, before any work."""
     with pytest.raises(workbench.ParameterError, match="single case"):
-        Study("tp1", k=[1e-6], T=1e-3)
+        Study("tp1", k=[1e-6], T=1e-3, reference="finest")
     ds = Study("tp1", k=[1e-5, 5e-6], T=1e-3, reference="ode", workers=0).run(progress=False)
     assert (ds.complete == 1).all() and np.isfinite(ds.error.values).all()
     st = Study("tp5", h=[0.05, 0.025], k_over_h=0.002, T=1e-3, reference={"h": 0.0125}, workers=0)
@@ -487,3 +490,25 @@ def test_an_error_controlled_case_is_not_extended(tmp_path):
         st = Study("tp1", T=1.0, **kw)
         st.run(tmp_path, progress=False)
     assert st.overhead["new_cases"] == 2
+
+
+@pytest.mark.slow
+@pytest.mark.parametrize("scheme, order", [("implicit", 1.0), ("bdf2", 2.0)])
+def test_default_orders_are_unbiased(scheme, order):
+    """A Study without a named reference (the README's way): on tp1 the rod's exact reference, orders within 0.1 of
+    the scheme's (the finest case as reference fitted 1.40 for backward Euler); the extrapolated reference (each case
+    against the next finer one, Richardson) gives the same order within 0.1 and errors within 25 % of the exact ones
+    (the finest case's extrapolated too), where comparing with the finest case overestimates the order."""
+    ks = [0.02, 0.01, 0.005, 0.0025]  # (the README's)
+    exact = Study("tp1", k=ks, scheme=scheme, workers=0).run(progress=False)
+    assert exact.attrs["reference"].startswith("auto: the scene's own reference")
+    p = float(exact.observed_order.sel(norm="error", along="k").squeeze())
+    assert abs(p - order) <= 0.1, p
+    extrapolated = Study("tp1", k=ks, scheme=scheme, workers=0, reference="extrapolated").run(progress=False)
+    q = float(extrapolated.observed_order.sel(norm="error", along="k").squeeze())
+    assert abs(q - order) <= 0.1, q
+    ratio = extrapolated.error.values.ravel() / exact.error.values.ravel()
+    assert np.all(np.abs(ratio - 1) < 0.25), ratio
+    finest = Study("tp1", k=ks, scheme=scheme, workers=0, reference="finest").run(progress=False)
+    biased = float(finest.observed_order.sel(norm="error", along="k").squeeze())
+    assert biased > p + 0.1, (biased, p)  # (the bias the default removes)

@@ -287,8 +287,8 @@ def _reference(text):
     from .input.parameters import PARAMETERS
     from .values import closest_name
 
-    if text in (None, "finest", "ode", "exact"):
-        return text or "finest"
+    if text in (None, "auto", "extrapolated", "finest", "ode", "exact"):
+        return text or "auto"
     out = {}
     for part in text.split(","):
         if "=" not in part:
@@ -455,7 +455,8 @@ def build_parser() -> argparse.ArgumentParser:
     p.add_argument("--scheme", nargs="+", choices=tuple(SCHEMES), help="schemes to sweep")
     p.add_argument("--sweep", action="append", metavar="NAME=V1,V2,...",
                    help="sweep any scene parameter over these values (repeatable), e.g. --sweep c_nu=1,100,1e4")
-    p.add_argument("--reference", help="finest (default) | ode | exact | h=..,k=..[,order=..,scheme=..]")
+    p.add_argument("--reference", help="auto (default: exact/ODE where there is one, else extrapolated from a "
+                   "series of three levels, else finest) | extrapolated | finest | ode | exact | h=..,k=..[,order=..]")
     p.add_argument("--compare", type=int, default=10, help="number of common times at which fields are compared")
     p.add_argument("--workers", type=int, default=2, help="local worker processes (0: in this process)")
     p.add_argument("--scheduler", help="dask.distributed scheduler address (run the cases there)")

@@ -56,9 +56,14 @@ class Study:
         (``k_over_h`` is this coupling), or ``{"gamma_nu": lambda c: 0.1 * c["c_nu"]}``; each must be a
         function of one axis, the same for all.
     reference : str, dict, object or None
-        ``"finest"`` (default: the finest case, then not reported as a case), ``"ode"``/``"exact"``
-        (rod scenes: :func:`workbench.references.rod_reference`), a dict of discretisation
-        values for a separate finer run, a solution object, or None (no errors).
+        ``"auto"`` (default: the scene's exact or ODE reference where it has one, else
+        ``"extrapolated"`` where a refinement series has three levels or more, else ``"finest"``,
+        with a warning), ``"extrapolated"`` (each case against the next finer one, the errors
+        extrapolated: :mod:`.reference`), ``"finest"`` (the finest case, then not reported as a
+        case: biased orders), ``"ode"``/``"exact"`` (rod scenes:
+        :func:`workbench.references.rod_reference`), a dict of discretisation values for a
+        separate finer run, a solution object, or None (no errors). The Dataset's ``reference``
+        attribute says which was used.
     measures : callable, optional
         ``measures(ds) -> dict`` of scalars computed from each case's Dataset; with a run
         reference, ``rel_error_<name>`` compares each with the reference's value.
@@ -74,7 +79,7 @@ class Study:
     """
 
     def __init__(self, scene, *, h=None, k=None, k_over_h=None, order=None, scheme=None, sweep=None, grids=None,
-                 couple=None, reference="finest", measures=None, n_compare=10, workers=2, client=None, **overrides):
+                 couple=None, reference="auto", measures=None, n_compare=10, workers=2, client=None, **overrides):
         _check_arguments(sweep=sweep, grids=grids, couple=couple, measures=measures, client=client)
         base = {name: value for name, value in (("h", h), ("k", k), ("order", order), ("scheme", scheme))
                 if value is not None}
@@ -102,13 +107,13 @@ class Study:
         self.workers = positive_int("workers", workers, lower=0)
         self.client = client
         self.measures = measures
+        self.layout = evaluate.Layout(self.cases, self.axes, self.coupled)
         self.reference_spec = reference
         self.reference = reference_obj = _reference(reference, self)
         self.listed = [c for c in self.cases if reference_obj is None or reference_obj.reported(c)]
         if reference_obj is not None and not self.listed:
             raise ParameterError("reference = 'finest' with a single case leaves nothing to compare: sweep at least two "
                                  "values (e.g. k=[0.02, 0.01]) or give a reference run or solution")
-        self.layout = evaluate.Layout(self.cases, self.axes, self.coupled)
         self._scenes = {}
         self.dataset = None
         self.overhead = {}
@@ -350,7 +355,7 @@ def _check_arguments(*, sweep, grids, couple, measures, client) -> None:
 
 
 def _reference(spec, study):
-    return reference.make(spec, study.scene, study.cases, study.axes)
+    return reference.make(spec, study.scene, study.cases, study.axes, study.layout)
 
 
 def cheapest(ds: xr.Dataset, tolerance: float, *, error: str = "error", cost: str = "wall_time"):

@@ -14,8 +14,6 @@ finest value), or, for coupled refinement sweeps (``k = 0.2 h``), along ``h``, `
 """
 from __future__ import annotations
 
-import warnings
-
 import numpy as np
 import xarray as xr
 
@@ -203,9 +201,9 @@ def _fit_one(err: xr.DataArray, layout: Layout, along: str, rest: list):
     count = np.isfinite(logy).sum(dim)
     if int(count.max()) < 2:
         return template, template
-    with warnings.catch_warnings():  # slices with fewer than two points are masked below
-        warnings.simplefilter("ignore", np.exceptions.RankWarning)
-        res = logy.polyfit(dim, 1, skipna=True)
+    # (full=True: xarray then ignores the rank warnings of slices with fewer than two points, masked below; with
+    # full=False it resets the filter to warn once per variable, whatever the caller's: ten warnings a study)
+    res = logy.polyfit(dim, 1, skipna=True, full=True)
     slope = res.polyfit_coefficients.sel(degree=1, drop=True).where(count >= 2)
     # standard error of the slope from the residuals: s^2 / sum (x - mean x)^2, s^2 = sum r^2 / (n - 2)
     valid = np.isfinite(logy)
@@ -291,6 +289,8 @@ def study_dataset(study, runs: dict, compare, history: str) -> xr.Dataset:
     probes = np.asarray(study.scene_of(study.listed[0])["probes"], dtype=float).reshape(-1, dim)
     probe_coords = {f"probe_{c}": ("probe", probes[:, i]) for i, c in enumerate(("x", "y", "z")[:dim])}
     ds = dataset(study.layout, rows, len(probes), probe_coords, dim)
+    if ref is not None and ref.kind == "difference":
+        extrapolate(ds, study.layout, ref)
     ds["compare_time"] = ("compare", np.asarray(compare), {"units": "s",
                                                            "long_name": "times at which fields are compared"})
     for name in ds.coords:
@@ -331,3 +331,44 @@ def _measured(measures, ds) -> dict:
             raise ParameterError(f"measures returned {name} = {str(value)[:40]!r}: return a number for each name") \
                 from None
     return out
+
+
+def extrapolate(ds: xr.Dataset, layout: Layout, ref) -> None:
+    """Turn the consecutive differences d_i of a :class:`~.reference.DifferenceReference` (in the error variables)
+    into error estimates, in place, and fit the orders again: along the series (coarse to fine, x its driver's
+    values) the order p is the slope of log d_i against log x_i, e_i = d_i / (1 - r_i^p) with r_i = x_{i+1} / x_i,
+    and the finest case's e_n = e_{n-1} r^p. A series whose differences do not fall (p <= 0: not yet in the
+    asymptotic range) gives no estimates (NaN)."""
+    dim = "level" if layout.refining else ref.driver
+    x = np.asarray(ds[ref.driver].values if dim == "level" else ds[dim].values, dtype=float)
+    order = np.argsort(-x)  # coarse first
+    for name in list(NORMS) + ["error_probe"]:
+        da = ds[name].transpose(dim, ...)
+        d = np.moveaxis(da.values, 0, -1)[..., order]
+        e = np.full(d.shape, np.nan)
+        xs = x[order]
+        for index in np.ndindex(d.shape[:-1]):
+            diffs = d[index][:-1]
+            ok = np.isfinite(diffs) & (diffs > 0)
+            if ok.sum() < 2:
+                continue
+            p = np.polyfit(np.log(xs[:-1][ok]), np.log(diffs[ok]), 1)[0]
+            if not p > 0:
+                continue
+            r = xs[1:] / xs[:-1]
+            e[index][:-1] = diffs / (1.0 - r ** p)
+            e[index][-1] = e[index][-2] * r[-1] ** p
+        back = np.empty_like(e)
+        back[..., order] = e
+        ds[name].values = _restore(back, da, ds[name].dims)
+    orders, spread = fit(ds, layout)
+    ds["observed_order"] = orders
+    ds["observed_order_stderr"] = spread
+    ds["pareto"] = (layout.dims, pareto_front(ds["error"].values, (ds["wall_time"] + ds["setup_time"]).values),
+                    ds["pareto"].attrs)
+
+
+def _restore(values_last, da, dims) -> np.ndarray:
+    """Values with the series axis last, back in the order of ``dims`` (``da``: the array with the series first)."""
+    first = np.moveaxis(values_last, -1, 0)  # (da.dims order)
+    return np.transpose(first, [da.dims.index(d) for d in dims])
