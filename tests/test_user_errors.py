@@ -557,15 +557,18 @@ def test_study_set_of_a_discretisation_name_is_honoured_or_refused(cli, key, val
     assert got == [value], f"--set {key}={value} was dropped: the study ran {key} = {got}" + res.show()
 
 
-ONE_CASE = _cases("onecase", {"one-case study": Cli(("study", "tp1", "--k", "0.1", "--h", "0.1", "--workers", "0",
-                                                      "--no-progress", "-o", "st.nc"))})
+ONE_CASE = _cases("onecase", {
+    "one-case study": Cli(("study", "slab", "--k", "0.1", "--h", "0.1", "--workers", "0", "--no-progress", "-o",
+                           "st.nc")),
+    "one-case rod study": Cli(("study", "tp1", "--k", "0.1", "--h", "0.1", "--workers", "0", "--no-progress", "-o",
+                               "st.nc"))})
 
 
 def test_one_case_study_is_not_a_success(cli):
-    """A study of one case against its own finest case (the default reference) has nothing to compare:
-    today it exits 0 and writes a result whose every error is NaN. Expected: a non-zero exit (2 if found before
-    the run, as it can be) with one clear ``error: ...`` line about the cases or the reference, no traceback and
-    no study archive with NaN errors."""
+    """A study of one case of a scene without an exact reference (the slab) has nothing to compare it with: it once
+    exited 0 and wrote a result whose every error is NaN. Expected: a non-zero exit (2, found before the run) with
+    one clear ``error: ...`` line about the cases or the reference (and no warning about a biased reference before
+    it), no traceback and no study archive with NaN errors."""
     res = cli("onecase", "one-case study")
     assert "Traceback" not in res.err, res.show()
     assert res.rc not in (0, None), "a study with nothing to compare must not succeed" + res.show()
@@ -573,6 +576,16 @@ def test_one_case_study_is_not_a_success(cli):
     assert len(lines) == 1 and lines[0].startswith("error: "), res.show()
     assert "case" in lines[0] or "reference" in lines[0], res.show()
     assert not (res.cwd / "st.nc").exists(), "a study archive of NaN errors was written" + res.show()
+
+
+def test_one_case_of_a_rod_is_measured_against_its_exact_solution(cli):
+    """The rod has an exact (ODE) reference, the default's first choice: one case is a measurement, not a mistake;
+    its errors are finite and the archive says which reference it used."""
+    res = cli("onecase", "one-case rod study")
+    assert res.rc == 0 and "Traceback" not in res.err, res.show()
+    ds = workbench.load(res.cwd / "st.nc")
+    assert "rod_reference" in ds.attrs["reference"], ds.attrs["reference"]
+    assert np.isfinite(ds.error.values).all() and 0 < float(ds.error.max()) < 0.1, ds.error.values
 
 
 SHADOW = _cases("shadow", {"./tp1 file": Cli(("run", "tp1", *RUN_TINY, "-o", "out.nc"), (), _files(

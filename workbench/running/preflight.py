@@ -10,8 +10,8 @@ the warnings that belong to the scene itself (P1 simplices on a thin body lock).
 Examples
 --------
 >>> import workbench
->>> est = estimate(workbench.scene("slab", h=1e-4).body, order=1)
->>> est.ndof > 1e7 and est.bytes > 1e11
+>>> est = estimate(workbench.scene("slab", h=2e-4).body, order=1)
+>>> est.ndof > 4e6 and est.bytes > 1e10
 True
 """
 from __future__ import annotations

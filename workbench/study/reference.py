@@ -307,6 +307,10 @@ def _auto(scene, cases, axes, layout):
     series = _series(cases, axes, layout)
     if series is not None:
         return DifferenceReference(cases, *series, describe=f"auto: {_EXTRAPOLATED}")
+    if len(cases) < 2:  # (refused here, before the warning about a biased finest reference that would follow)
+        raise ParameterError("a study of a single case has nothing to compare it with (this scene has no exact "
+                             "reference): sweep at least two values (e.g. k=[0.02, 0.01]) or give a reference run "
+                             "or solution")
     warnings.warn("the study compares its cases with the finest one (no exact reference, and no refinement series of "
                   "three levels to extrapolate from): its orders are biased (the finest case's own error is not "
                   "small against the others'); sweep three levels, or name a finer run as the reference",
