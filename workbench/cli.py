@@ -107,12 +107,36 @@ def _check_outputs(args, *, cases=None) -> None:
         value = getattr(args, option, None)
         if value is not None:
             given[f"--{option}"] = check_output(value, f"--{option}", folder=folder)
+    if any(getattr(args, option, None) is not None for option in ("plot", "pareto")):
+        _check_backend()
     seen = {}
     for option, path in given.items():  # two outputs in one file: the later would replace the earlier
         key = Path(os.path.abspath(path))
         if key in seen:
             raise ParameterError(f"{seen[key]} and {option} name the same path {str(path)!r}; give each its own")
         seen[key] = option
+
+
+def _check_backend() -> None:
+    """A figure is drawn after the run: a matplotlib backend that does not exist (MPLBACKEND) is refused before it."""
+    backend = os.environ.get("MPLBACKEND")
+    if not backend:
+        return
+    if "matplotlib" not in sys.modules:  # (its import itself fails on a backend it does not know, half-done)
+        os.environ.pop("MPLBACKEND")
+        try:
+            import matplotlib  # noqa: F401
+        finally:
+            os.environ["MPLBACKEND"] = backend
+    import matplotlib
+    from matplotlib import rcsetup
+
+    try:
+        rcsetup.validate_backend(backend)
+    except ValueError:
+        raise ParameterError(f"MPLBACKEND = {backend!r} is not a matplotlib backend; unset it or give one such as "
+                             "'Agg' (files only)") from None
+    matplotlib.rcParams["backend"] = backend  # (what its import does with MPLBACKEND)
 
 
 def _threads(value):
@@ -223,6 +247,8 @@ def cmd_run(args) -> int:
         raise ParameterError("give a scene (a built-in name or a .toml file), or --restart ARCHIVE to continue a run "
                              "(see: workbench run --help)")
     _threads(args.threads)
+    if args.restart is not None and not args.restart.strip():
+        raise ParameterError("--restart '': give the path of an archive to continue")
     if args.restart is None:  # the values checked first, before NGSolve and xarray load (0.2 s, not 0.9 s, a mistake)
         from .input.scenes import scene
 
@@ -381,7 +407,7 @@ def cmd_reproduce(args) -> int:
     import time
     from pathlib import Path
 
-    from .errors import Diverged
+    from .errors import Diverged, NotWritten
     from .output.files import check_output
     from .paper import reproduction
 
@@ -401,6 +427,13 @@ def cmd_reproduce(args) -> int:
                 if written == 0:
                     print(f"  wrote {where} (incomplete: see attrs 'failure')\n")
             code = EXIT_DIVERGED
+            continue
+        except NotWritten as err:  # keep the run (exit 4, after the other problems)
+            _, where = _write_or_keep(err.dataset)  # (a copy in the temporary folder; if that fails, it says so)
+            if where is not None:
+                print(_one_line(f"error: {err.filename} could not be written ({err.strerror}); the result is kept in "
+                                f"{where}"), file=sys.stderr)
+            code = max(code, EXIT_NOT_WRITTEN)
             continue
         print(reproduction.report(problem, result))
         print(f"  wrote {len(result['files'])} files to {args.out} ({time.perf_counter() - t0:.1f} s)\n")

@@ -9,6 +9,7 @@
 * :class:`NewtonFailed` — an implicit step's nonlinear iteration did not converge.
 * :class:`StepLimitExceeded` — the explicit scheme's state reached springs whose stability
   limit is below its step; stopped like :class:`Diverged`, with what was computed.
+* :class:`NotWritten` — a file of a computed result could not be written; it carries the result.
 """
 from __future__ import annotations
 
@@ -40,3 +41,12 @@ class NewtonFailed(Diverged):
 class StepLimitExceeded(Diverged):
     """The explicit scheme's step exceeds the stability limit of the springs that act in the state the run has
     reached (they were not acting when it started); ``dataset`` holds the steps before, marked incomplete."""
+
+
+class NotWritten(OSError):
+    """A result was computed but a file of it could not be written (a full disk, a folder gone); ``dataset`` holds the
+    result, so a caller can keep it elsewhere."""
+
+    def __init__(self, err: OSError, dataset=None):
+        super().__init__(err.errno, err.strerror or str(err), err.filename)
+        self.dataset = dataset

@@ -177,7 +177,12 @@ def _points(name, value):
 
 def _times(name, value):
     if isinstance(value, str):  # "0.1, 0.2", or as `workbench show` prints a list: "[0.1, 0.2]"
-        value = [v for v in value.strip().strip("[]()").replace(";", ",").split(",") if v.strip()]
+        text = value.strip()
+        if text[:1] in "[(" and text[-1:] in ")]":
+            text = text[1:-1]
+        if any(c in text for c in "[]()"):
+            raise ParameterError(f"{name} = {value!r}: expected a flat list of times, e.g. [0.1, 0.2]")
+        value = [v for v in text.replace(";", ",").split(",") if v.strip()]
     try:
         ts = tuple(float(v) for v in (value if isinstance(value, Iterable) else [value]))
     except (TypeError, ValueError):

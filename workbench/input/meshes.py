@@ -45,6 +45,25 @@ def cache_folder() -> Path:
     return Path(root) / "meshes"
 
 
+def _writable(folder: Path) -> Path:
+    """``folder``, made; or, when it cannot be written, a folder in the temporary directory (with a warning)."""
+    import tempfile
+    import warnings
+
+    try:
+        folder.mkdir(parents=True, exist_ok=True)
+        if os.access(folder, os.W_OK | os.X_OK) and not str(folder.resolve()).startswith(("/proc/", "/sys/")):
+            return folder
+        reason = "no permission to write there"
+    except OSError as err:
+        reason = err.strerror or str(err)
+    fallback = Path(tempfile.gettempdir()) / f"workbench-{os.getuid()}" / "meshes"
+    warnings.warn(f"the mesh cache {str(folder)!r} cannot be written ({reason}; set WORKBENCH_CACHE to a writable "
+                  f"folder): meshes are stored in {str(fallback)!r}", RuntimeWarning, stacklevel=3)
+    fallback.mkdir(parents=True, exist_ok=True)
+    return fallback
+
+
 def digest(path) -> str:
     """sha256 of a file's content (what a cached result made from it is keyed by)."""
     h = hashlib.sha256()
@@ -144,8 +163,7 @@ def store(obj, h: float | None = None) -> Path:
     else:
         raise ParameterError(f"mesh = {type(obj).__name__} object: give a mesh file path (.msh, .vol), a netgen/OCC "
                              "geometry or an NGSolve/netgen mesh")
-    folder = cache_folder()
-    folder.mkdir(parents=True, exist_ok=True)
+    folder = _writable(cache_folder())
     tmp = folder / f".store.{os.getpid()}.vol"
     ngmesh.Save(str(tmp))
     final = folder / f"{digest(tmp)[:24]}.vol"
@@ -158,7 +176,8 @@ def _from_gmsh(path: Path):
     import meshio
     import netgen.meshing as nm
 
-    data = meshio.read(str(path), file_format="gmsh")
+    # (the format's reader itself: meshio.read prints the reader's error and calls sys.exit(1) when it fails)
+    data = meshio.gmsh.read(str(path))
     names = {(int(v[1]), int(v[0])): k for k, v in data.field_data.items()}  # (dim, tag) -> name
     pts = np.asarray(data.points, dtype=float)
     dim = 3 if any(b.type.startswith("tetra") for b in data.cells) else 2

@@ -289,8 +289,9 @@ def make(name: str, overrides: dict | None = None, *, base: str | None = None, d
     """Build and check a built-in scene (``base`` defaults to ``name``) with ``overrides``."""
     base = base or name
     if base not in PRESETS:
-        raise ParameterError(f"unknown scene {base!r}; built-in scenes: {', '.join(PRESETS)}"
-                             + closest_name(str(base), PRESETS) + " (or give a .toml file)")
+        shown = repr(base) if len(str(base)) <= 80 else repr(str(base)[:80]) + f"... ({len(str(base))} characters)"
+        raise ParameterError(f"unknown scene {shown}; built-in scenes: {', '.join(PRESETS)}"
+                             + closest_name(str(base)[:80], PRESETS) + " (or give a .toml file)")
     preset = PRESETS[base]
     known = _known(base)
     overrides = dict(overrides or {})
@@ -489,8 +490,9 @@ def _check_memory(body, v):
                              "of the kernel tensor (negative for relaxation)")
 
 
-#: The largest scene file read (a scene is a few lines of TOML).
-MAX_SCENE_FILE = 1e6
+#: The largest scene file read: a scene is a few lines of TOML, but comments may be long (a 2 MB file of comments
+#: parses in 0.1 s); at this size a file of junk keys still parses in about 20 s before it is refused.
+MAX_SCENE_FILE = 16e6
 
 _TOML_KEYS = {"scene", "name", "description", "parameters", "traction", "geometry", "boundaries", "model"}
 
@@ -540,11 +542,19 @@ def from_toml(path, overrides: dict | None = None) -> Scene:
 
 def _read_toml(path: Path) -> dict:
     """The table of a scene file; a file that is missing, unreadable or not TOML is a ParameterError naming it."""
-    label = str(path)
-    if path.exists() and not path.is_file() and not path.is_dir():  # (a pipe would wait for ever, /dev/zero fill memory)
-        raise ParameterError(f"scene file {label!r} is not a regular file (a device, a pipe or a socket)")
-    if path.is_file() and path.stat().st_size > MAX_SCENE_FILE:
-        raise ParameterError(f"scene file {label!r} is {path.stat().st_size / 1e6:.3g} MB long; a scene file is a "
+    import stat
+
+    label = str(path) if len(str(path)) <= 200 else str(path)[:200] + "..."
+    try:
+        mode = path.stat()
+    except FileNotFoundError:
+        raise ParameterError(f"scene file {label!r} not found") from None
+    except OSError as err:  # (a name too long, a loop of links, no permission on a folder)
+        raise ParameterError(f"scene file {label!r} cannot be read: {err.strerror}") from None
+    if not stat.S_ISREG(mode.st_mode) and not stat.S_ISDIR(mode.st_mode):  # (a pipe would wait for ever, /dev/zero
+        raise ParameterError(f"scene file {label!r} is not a regular file (a device, a pipe or a socket)")  # fill RAM)
+    if stat.S_ISREG(mode.st_mode) and mode.st_size > MAX_SCENE_FILE:
+        raise ParameterError(f"scene file {label!r} is {mode.st_size / 1e6:.3g} MB long; a scene file is a "
                              f"short TOML text (at most {MAX_SCENE_FILE / 1e6:g} MB)")
     try:
         raw = path.read_bytes()
@@ -617,6 +627,14 @@ def _looks_like_path(text: str) -> bool:
     return text.endswith(".toml") or "/" in text or "\\" in text
 
 
+def _is_file(text: str) -> bool:
+    """Whether ``text`` names an existing file (False for a name the file system cannot hold, e.g. 300 bytes long)."""
+    try:
+        return Path(text).is_file()
+    except OSError:
+        return False
+
+
 def scene(name_or_path=None, *, model=None, **overrides) -> Scene:
     """A scene from a built-in name, a TOML path or an existing :class:`Scene`, with overrides.
 
@@ -648,11 +666,11 @@ def scene(name_or_path=None, *, model=None, **overrides) -> Scene:
         return name_or_path.with_(**overrides) if overrides else name_or_path
     text = str(name_or_path)
     if text in PRESETS:
-        if Path(text).is_file():
+        if _is_file(text):
             warnings.warn(f"scene {text!r}: using the built-in scene; the file ./{text} in this folder is not read "
                           f"(give it as ./{text} to use the file)", RuntimeWarning, stacklevel=2)
         return make(text, overrides)
-    if _looks_like_path(text) or Path(text).is_file():
+    if _looks_like_path(text) or _is_file(text):
         return from_toml(text, overrides)
     return make(text, overrides)
 

@@ -122,6 +122,10 @@ def check_output(path, option: str, *, folder: bool = False) -> Path:
     if longest > 255:
         raise ParameterError(f"{option} {str(path)[:60]!r}...: a name in it is {longest} bytes long, more than the 255 "
                              "a file system allows")
+    whole = len(os.fsencode(os.path.abspath(path)))
+    if whole >= 4096:  # (PATH_MAX on Linux: the temporary beside it would not open)
+        raise ParameterError(f"{option} {str(path)[:60]!r}...: the path is {whole} bytes long, more than the 4095 a "
+                             "file system allows")
     if path.exists() and not path.is_file() and not path.is_dir():
         raise ParameterError(f"{option} {str(path)!r} exists and is not a regular file (a device, a pipe or a socket); "
                              "give a file name")

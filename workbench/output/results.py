@@ -390,12 +390,13 @@ def write(ds: xr.Dataset, path) -> Path:
     """Write ``ds`` to netCDF atomically (:func:`workbench.output.files.atomic_write`); OSError naming ``path`` when it
     cannot be written (a full disk, a folder without permission, a device)."""
     from ..errors import ParameterError
-    from .files import atomic_write
+    from .files import atomic_write, check_output
 
     if not isinstance(ds, xr.Dataset):
         raise ParameterError(f"workbench.write: give the xarray Dataset of a run or a study, got {type(ds).__name__}")
     if not isinstance(path, (str, os.PathLike)) or not str(path).strip():
         raise ParameterError(f"workbench.write: path = {path!r}: give a file name")
+    check_output(path, "workbench.write: path")  # (a folder, a device, /proc, no permission: named before writing)
     return atomic_write(path, lambda tmp: ds.to_netcdf(tmp, engine="netcdf4"))
 
 

@@ -35,6 +35,7 @@ from pathlib import Path
 import numpy as np
 
 import workbench
+from workbench.errors import NotWritten
 from workbench.output.results import far_facet
 from workbench.references import rod_ode, tp1_exact
 
@@ -334,15 +335,18 @@ def reproduce(problem, out=DEFAULT_OUT, h=None, k=None, side=True, vtk=False, **
     numbers = key_numbers(problem, ds, ref)
     if side:
         numbers |= side_studies(problem, h, k, **overrides)
-    files = [workbench.write(ds, out / f"{problem}.nc")]
-    files += make_figures(problem, ds, out, ref)
-    if vtk:
-        from workbench.output import vtk as vtk_export
-
-        files += vtk_export.export(ds, out / "vtk", stem=problem)
     summary = {"problem": problem, "h": ds.attrs["h_max"], "k": ds.attrs["k_actual"],
                "numbers": numbers, "paper": PAPER[problem]}
-    files.append(_write_json(out / f"{problem}_numbers.json", summary))
+    try:
+        files = [workbench.write(ds, out / f"{problem}.nc")]
+        files += make_figures(problem, ds, out, ref)
+        if vtk:
+            from workbench.output import vtk as vtk_export
+
+            files += vtk_export.export(ds, out / "vtk", stem=problem)
+        files.append(_write_json(out / f"{problem}_numbers.json", summary))
+    except OSError as err:  # (the run is not lost: the caller keeps it elsewhere)
+        raise NotWritten(err, ds) from None
     return {"numbers": numbers, "paper": PAPER[problem], "files": files, "ds": ds, "scene": sc.plain()}
 
 

@@ -97,7 +97,30 @@ def warnings_for(scene, model) -> list:
         out.append(f"{scene.name}: P1 elements on a thin body (thickness / length = {g.aspect():.2g}) lock in bending, "
                    "so displacements come out too small (the block at h = 0.05: 50 %; the slab at h = 0.0125: 5 %); "
                    "order = 2 converges at the same cost")
-    return out + _contact_zone(scene, g)
+    return out + _contact_zone(scene, g) + _quadrature_cost(scene, model)
+
+
+#: Seconds per (step x stored step x displacement dof) of the quadrature memory (the rod, ndof 21: 10 s for 1e4
+#: steps, 25 s for 2e4, on the 2-core machine of the project).
+QUADRATURE_COST = 3e-9
+#: Steps of the quadrature memory beyond which its O(n^2) cost is said.
+QUADRATURE_STEPS = 20000
+
+
+def _quadrature_cost(scene, model) -> list:
+    """A general kernel integrated by quadrature works over every stored step at each step: O(n^2) in the steps.
+    Beyond :data:`QUADRATURE_STEPS`, the expected time and the O(1)-per-step alternative are said."""
+    memory = model.memory
+    if memory is None or memory.kind != "kernel":
+        return []
+    n = scene["T"] / scene["k"]
+    if n <= QUADRATURE_STEPS:
+        return []
+    ndof = estimate(model.geometry, order=scene["order"]).ndof
+    seconds = QUADRATURE_COST * n * n / 2 * ndof
+    return [f"the kernel's memory by quadrature works over all stored steps at every step: {n:.3g} steps (T = "
+            f"{scene['T']:g}, k = {scene['k']:g}) cost O(n^2), about {seconds / 60:.2g} min here; "
+            "kernel_approximation = 'exponentials' (a sum of exponentials within kernel_tol) costs O(1) per step"]
 
 
 def _contact_zone(scene, g) -> list:

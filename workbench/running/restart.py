@@ -259,6 +259,9 @@ def _check_consistent(ds: xr.Dataset, state: dict) -> None:
     for key in ("time", "steps", "recorder"):
         if key not in state or (key != "time" and not isinstance(state[key], dict)):
             raise NoRestartState(f"the archive's restart state has no {key}")
+    if "time" not in ds.dims or "step" not in ds.variables or ds["step"].dims != ("time",):
+        raise NoRestartState("the archive has no record over time (a time dimension with its step numbers), which a "
+                             "continuation extends")
 
 
 def archived_scene(ds: xr.Dataset, *, whole: bool = False, **overrides):

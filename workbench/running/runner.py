@@ -82,7 +82,7 @@ def run(scene=None, *, restart=None, checkpoint=None, progress=None, record_time
         When the state becomes non-finite or unbounded; ``err.dataset`` holds
         the steps computed before, marked ``status = "incomplete"``.
     """
-    _check_options(overrides, checkpoint, limit, threads)
+    _check_options(overrides, checkpoint, limit, threads, progress)
     _check_objects(record_times=record_times, times=times, model=model, restart=restart)
     sc, resume = _scene_and_archive(scene, restart, overrides, model)
     if sc["checkpoint_every"] and checkpoint is None:
@@ -101,7 +101,7 @@ def run(scene=None, *, restart=None, checkpoint=None, progress=None, record_time
         return job.execute(grid, sync, record_times, limit)
 
 
-def _check_options(overrides: dict, checkpoint, limit, threads) -> None:
+def _check_options(overrides: dict, checkpoint, limit, threads, progress=None) -> None:
     """The options of :func:`run` that are not scene values, checked before any work."""
     options = [name for name, p in inspect.signature(run).parameters.items() if p.kind is p.KEYWORD_ONLY]
     for key in overrides:
@@ -116,6 +116,8 @@ def _check_options(overrides: dict, checkpoint, limit, threads) -> None:
             raise ParameterError(f"checkpoint = {checkpoint!r}: give the path of a file")
 
         check_output(checkpoint, "checkpoint")
+    if progress is not None and not isinstance(progress, (bool, np.bool_)):
+        raise ParameterError(f"progress = {progress!r}: give True or False (default: a bar only on a terminal)")
     if limit is not None and (isinstance(limit, bool) or not isinstance(limit, (int, float)) or not limit > 0):
         raise ParameterError(f"limit = {limit!r}: give the displacement bound in m, a number > 0")
     if threads is not None and (isinstance(threads, bool) or not isinstance(threads, int) or not 1 <= threads <= 256):
@@ -159,14 +161,22 @@ def _check_objects(record_times, times, model, restart) -> None:
 def _extremes(sc) -> list:
     """'name = value' for the values the user gave that are extreme (beyond 1e12 or below 1e-12 in magnitude, or a
     Poisson's ratio within 1e-4 of its limits): what a numerical failure of the setup comes from."""
+    def numbers(value):  # (the entries of a matrix or a list of values too: elastic_tensor, prony)
+        if isinstance(value, bool):
+            return []
+        if isinstance(value, (int, float)):
+            return [float(value)]
+        if isinstance(value, (list, tuple)):
+            return [x for item in value for x in numbers(item)]
+        return []
+
     out = []
     for name in sorted(sc.set_by_user):
         value = sc.values.get(name)
-        if isinstance(value, bool) or not isinstance(value, (int, float)):
-            continue
-        poisson = name.startswith("nu") and (value < -1 + 1e-4 or value > 0.5 - 1e-4)
-        if poisson or abs(value) > 1e12 or 0 < abs(value) < 1e-12:
-            out.append(f"{name} = {value:g}")
+        found = numbers(value)
+        poisson = name.startswith("nu") and isinstance(value, (int, float)) and (value < -1 + 1e-4 or value > 0.5 - 1e-4)
+        if poisson or any(abs(x) > 1e12 or 0 < abs(x) < 1e-12 for x in found):
+            out.append(f"{name} = {value:g}" if isinstance(value, (int, float)) else f"{name} = {results.brief(value)}")
     return out
 
 

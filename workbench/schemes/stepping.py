@@ -182,10 +182,12 @@ class AdaptiveSteps:
 
     def __init__(self, T, k0, *, rtol, atol, k_min, k_max, order, sync=(), t0=0.0, admissible=None):
         self.t, self.T, self.k = float(t0), float(T), float(min(k0, k_max))
-        self.k0, self.rtol, self.atol, self.k_min, self.k_max = float(k0), rtol, atol, k_min, k_max
+        self.tol = 1e-12 * max(1.0, T)
+        # (a step below ~1e-10 T cannot be told from round-off in t: k_min = 1e-300 would divide by t - t_prev = 0)
+        self.k_floor = 100 * self.tol
+        self.k0, self.rtol, self.atol, self.k_min, self.k_max = float(k0), rtol, atol, max(k_min, self.k_floor), k_max
         self.order = order
         self.growth = self.max_growth
-        self.tol = 1e-12 * max(1.0, T)
         self.sync = sorted(float(s) for s in sync if t0 + self.tol < s < T - self.tol)
         self.err_prev = None
         self.accepted_steps = self.rejected_steps = 0
@@ -303,7 +305,8 @@ class AdaptiveSteps:
             new = k * max(0.2, 0.9 * err ** (-1.0 / self.order))
         if new < self.k_min * (1 - 1e-9) or (new <= self.k_min and k <= self.k_min * (1 + 1e-9)):
             why = "the nonlinear solve failed" if failed else f"the scaled local error is {err:.3g}"
-            raise StepTooSmall(f"error control needs a step below k_min = {self.k_min:.3g} s at t = {self.t:.6g} s "
+            floor = " (the smallest step time resolves here)" if self.k_min == self.k_floor else ""
+            raise StepTooSmall(f"error control needs a step below k_min = {self.k_min:.3g} s{floor} at t = {self.t:.6g} s "
                                f"({why} with k = {k:.3g} s): loosen rtol/atol, lower k_min, or check the "
                                "scene", time=self.t)
         self.k = new if theta is not None else self._quantize(new)

@@ -212,8 +212,16 @@ class Study:
         bar = tqdm(total=len(todo), initial=len(todo) - len(missing), unit="case", desc=f"study {self.scene.name}",
                    disable=None if progress is None else not progress)
         try:
+            unwritten = None
             for case, ds in stream:
-                results.write(ds, archive / f"{case.key}.nc")
+                try:
+                    results.write(ds, archive / f"{case.key}.nc")
+                except OSError as err:  # (the case archives are a cache: the study goes on with the runs in memory)
+                    if unwritten is None:
+                        warnings.warn(f"the case archive {err.filename} could not be written ({err.strerror or err}): "
+                                      "the study goes on without keeping its cases (a study run again recomputes them)",
+                                      RuntimeWarning, stacklevel=2)
+                    unwritten = err
                 runs[case] = ds
                 bar.update()
         finally:
@@ -265,6 +273,9 @@ class Study:
         ds = self.dataset
         if ds is None:
             raise ParameterError("Study.assert_order: run the study first (Study.run)")
+        for name, value in (("expected", expected), ("tol", tol), ("max_error", max_error)):
+            if value is not None and (isinstance(value, bool) or not isinstance(value, (int, float))):
+                raise ParameterError(f"Study.assert_order: {name} = {value!r}; give a number")
         if norm not in ds.norm.values:
             raise ParameterError(f"Study.assert_order: norm = {norm!r}; the study has {', '.join(map(str, ds.norm.values))}")
         along = along or ("h+k" if self.layout.refining else ("h" if len(self.hs) > 1 else "k"))
@@ -348,6 +359,13 @@ def _check_arguments(*, sweep, grids, couple, measures, client) -> None:
     if grids is not None and (not isinstance(grids, (list, tuple)) or not grids
                               or not all(isinstance(g, dict) for g in grids)):
         raise ParameterError(f"grids = {grids!r}: give a non-empty list of dicts (axis -> values), one per grid")
+    for grid in grids or ():
+        if not grid:
+            raise ParameterError("grids: an empty dict sweeps nothing; give each grid at least one axis, e.g. "
+                                 "{'k': [0.02, 0.01]}")
+        for name in grid:
+            if name not in PARAMETERS:
+                raise ParameterError(f"grids: {name!r} is not a parameter" + closest_name(str(name), PARAMETERS))
     if measures is not None and not callable(measures):
         raise ParameterError(f"measures = {measures!r}: give a function of a case's Dataset returning a dict of numbers")
     if isinstance(client, (int, float, bool)):

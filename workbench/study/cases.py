@@ -136,7 +136,13 @@ def expand(scene, grids, couple) -> tuple[list, dict]:
         for combo in itertools.product(*(g[n] for n in names)):
             values = dict(zip(names, combo))
             for name, rule in couple.items():
-                values[name] = _coerce(scene, name, rule(dict(values)))
+                try:
+                    coupled = rule(dict(values))
+                except Exception as err:  # noqa: BLE001 (the user's function: named, its traceback kept as the cause)
+                    raise ParameterError(f"couple: the function for {name} raised {type(err).__name__}: "
+                                         f"{str(err)[:200]} (it is called with a case's values of "
+                                         f"{', '.join(sorted(values))})") from err
+                values[name] = _coerce(scene, name, coupled)
             case = Case(values)
             if case not in cases:
                 cases.append(case)

@@ -319,7 +319,11 @@ def _measured(measures, ds) -> dict:
     """``measures(ds)`` as a dict of floats, or a ParameterError saying what it returned."""
     from ..errors import ParameterError
 
-    got = measures(ds)
+    try:
+        got = measures(ds)
+    except Exception as err:  # noqa: BLE001 (the user's function: named, its own traceback kept as the cause)
+        raise ParameterError(f"measures raised {type(err).__name__}: {str(err)[:200]} (the function given as measures "
+                             "is called with each case's Dataset)") from err
     if not isinstance(got, dict):
         raise ParameterError(f"measures returned {type(got).__name__} {str(got)[:40]!r}: return a dict of names to "
                              "numbers")
