@@ -1643,8 +1643,12 @@ def build_inputs():  # noqa: C901 (a long list, on purpose)
             i = base.index(drop[0])
             base = base[:i] + base[i + drop[1]:]
         add(f"study_{name}", I, expect, base + extra)
-    add("study_single_case_finest", I, "refuse-naming:reference", ["study", "tp1", "--h", "0.1", "--k", "0.1", "--set",
-                                                                   "T=0.2", "--workers", "0", "--no-progress"])
+    # (a rod has an exact reference, the default's first choice: one case of it is a measurement; a scene without
+    # one has nothing to compare a single case with)
+    add("study_single_case_rod", I, "run", ["study", "tp1", "--h", "0.1", "--k", "0.1", "--set", "T=0.2", "--workers",
+                                             "0", "--no-progress"])
+    add("study_single_case_finest", I, "refuse-naming:re:case|reference",
+        ["study", "tp5", "--h", "0.1", "--k", "0.01", "--set", "T=0.02", "--workers", "0", "--no-progress"])
     add("study_unknown_scene", I, "refuse-naming:tp6", ["study", "tp6", "--k", "0.1", "0.05"])
     add("study_reference_exact_on_slab", I, "refuse-naming:re:exact|ode|rod",
         ["study", "tp5", "--h", "0.1", "--k", "0.01", "0.005", "--set", "T=0.05", "--reference", "exact", "--workers",
