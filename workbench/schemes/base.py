@@ -232,16 +232,20 @@ class ErrorControlled:
             return None
         c = self.error_constant(t, order)
         c = abs(c / (1.0 + c))  # u_n - predictor = l + P = (1 + C) P
+        return c * self.scaled_difference(pred[0], pred[1], rtol, atol)
+
+    def scaled_difference(self, u_other, beta_other, rtol: float, atol: float) -> float:
+        """The norm of error control (:meth:`local_error`) of the current state minus another (u, beta)."""
         u = self.d.u.vec.FV().NumPy()
         free = self._free
-        e = (u[free] - pred[0][free]) if free is not None else (u - pred[0])
-        err = c * np.abs(e).max() / (atol + rtol * max(self.u_scale, np.abs(u).max()))
+        e = (u[free] - u_other[free]) if free is not None else (u - u_other)
+        err = np.abs(e).max() / (atol + rtol * max(self.u_scale, np.abs(u).max()))
         beta = self._beta()
         if beta is not None:  # beta is of order 1: relative to rtol
             w = self.d.rate_side.weights
             eb = np.zeros(len(beta))
             eb[self.d.rate_side.element] = w  # facet measures in facet order
-            err = max(err, c * np.sqrt(np.sum(eb * (beta - pred[1]) ** 2) / np.sum(eb)) / rtol)
+            err = max(err, np.sqrt(np.sum(eb * (beta - beta_other) ** 2) / np.sum(eb)) / rtol)
         return float(err)
 
     @cached_property
