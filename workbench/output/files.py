@@ -104,8 +104,10 @@ def atomic_write(path, writer) -> Path:
         os.replace(tmp, path)
     except (OSError, RuntimeError, ValueError) as err:  # (netCDF4: RuntimeError "NetCDF: HDF error" on a full disk)
         tmp.unlink(missing_ok=True)
-        reason = getattr(err, "strerror", None) or (str(err).splitlines()[0] if str(err) else type(err).__name__)
-        raise OSError(getattr(err, "errno", None) or errno.EIO, reason, str(path)) from None
+        said = str(err).splitlines()[0] if str(err) else type(err).__name__
+        if isinstance(err, OSError):
+            raise OSError(err.errno or errno.EIO, err.strerror or said, str(path)) from None
+        raise OSError(errno.EIO, said, str(path)) from None
     except BaseException:
         tmp.unlink(missing_ok=True)
         raise

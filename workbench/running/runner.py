@@ -85,9 +85,7 @@ def run(scene=None, *, restart=None, checkpoint=None, progress=None, record_time
     _check_options(overrides, checkpoint, limit, threads, progress)
     _check_objects(record_times=record_times, times=times, model=model, restart=restart)
     sc, resume = _scene_and_archive(scene, restart, overrides, model)
-    if sc["checkpoint_every"] and checkpoint is None:
-        raise ParameterError(f"checkpoint_every = {sc['checkpoint_every']} needs a file to write the checkpoints to: "
-                             "give -o OUT.nc (workbench.run: checkpoint=PATH)")
+    _check_checkpoint(sc, checkpoint)
     numerics = numerics_of.from_scene(sc, threads)
     grid, sync = _grid(sc, numerics, times, record_times, resume)
     model = model or sc.model_of()
@@ -99,6 +97,12 @@ def run(scene=None, *, restart=None, checkpoint=None, progress=None, record_time
     job = _Run(sc, model, numerics, world, call, resume=resume, checkpoint=checkpoint, progress=progress)
     with blas_single_threaded(), _quiet_unless_root(world):
         return job.execute(grid, sync, record_times, limit)
+
+
+def _check_checkpoint(sc, checkpoint) -> None:
+    if sc["checkpoint_every"] and checkpoint is None:
+        raise ParameterError(f"checkpoint_every = {sc['checkpoint_every']} needs a file to write the checkpoints to: "
+                             "give -o OUT.nc (workbench.run: checkpoint=PATH)")
 
 
 def _check_options(overrides: dict, checkpoint, limit, threads, progress=None) -> None:

@@ -188,14 +188,7 @@ class Study:
         from tqdm.auto import tqdm
 
         record, compare = self._times()
-        if archive is not None:
-            from ..output.files import check_output
-
-            if not isinstance(archive, (str, os.PathLike)):
-                raise ParameterError(f"Study.run: archive = {archive!r}: give a folder for the case archives")
-            check_output(archive, "Study.run: archive", folder=True)
-        archive = Path(archive) if archive is not None else Path(tempfile.mkdtemp(prefix="workbench-study-"))
-        archive.mkdir(parents=True, exist_ok=True)
+        archive = _archive_folder(archive)
         todo = list(dict.fromkeys(self.listed + (self.reference.cases() if self.reference else [])))
         runs, missing, expected, plans = self._archived(todo, archive, record, compare, extend)
         tasks = [(c, (self.scene, c.values(), self._record_times(c, record, compare), list(compare),
@@ -212,16 +205,9 @@ class Study:
         bar = tqdm(total=len(todo), initial=len(todo) - len(missing), unit="case", desc=f"study {self.scene.name}",
                    disable=None if progress is None else not progress)
         try:
-            unwritten = None
+            kept = True
             for case, ds in stream:
-                try:
-                    results.write(ds, archive / f"{case.key}.nc")
-                except OSError as err:  # (the case archives are a cache: the study goes on with the runs in memory)
-                    if unwritten is None:
-                        warnings.warn(f"the case archive {err.filename} could not be written ({err.strerror or err}): "
-                                      "the study goes on without keeping its cases (a study run again recomputes them)",
-                                      RuntimeWarning, stacklevel=2)
-                    unwritten = err
+                kept = _keep(ds, archive / f"{case.key}.nc", warn=kept)
                 runs[case] = ds
                 bar.update()
         finally:
@@ -273,9 +259,7 @@ class Study:
         ds = self.dataset
         if ds is None:
             raise ParameterError("Study.assert_order: run the study first (Study.run)")
-        for name, value in (("expected", expected), ("tol", tol), ("max_error", max_error)):
-            if value is not None and (isinstance(value, bool) or not isinstance(value, (int, float))):
-                raise ParameterError(f"Study.assert_order: {name} = {value!r}; give a number")
+        _numbers("Study.assert_order", expected=expected, tol=tol, max_error=max_error)
         if norm not in ds.norm.values:
             raise ParameterError(f"Study.assert_order: norm = {norm!r}; the study has {', '.join(map(str, ds.norm.values))}")
         along = along or ("h+k" if self.layout.refining else ("h" if len(self.hs) > 1 else "k"))
@@ -298,6 +282,40 @@ class Study:
         if self.dataset is None:
             raise ParameterError("Study.cheapest: run the study first (Study.run)")
         return cheapest(self.dataset, tolerance, error=error, cost=cost)
+
+
+def _archive_folder(archive) -> Path:
+    """The folder of a study's case archives (checked before any work; None: a new temporary folder), made."""
+    if archive is not None:
+        from ..output.files import check_output
+
+        if not isinstance(archive, (str, os.PathLike)):
+            raise ParameterError(f"Study.run: archive = {archive!r}: give a folder for the case archives")
+        check_output(archive, "Study.run: archive", folder=True)
+    archive = Path(archive) if archive is not None else Path(tempfile.mkdtemp(prefix="workbench-study-"))
+    archive.mkdir(parents=True, exist_ok=True)
+    return archive
+
+
+def _keep(ds, path: Path, warn: bool) -> bool:
+    """Write a case's archive; whether it was written. The case archives are a cache: one that cannot be written (a
+    full disk) is warned about (once: ``warn``) and the study goes on with the runs in memory."""
+    try:
+        results.write(ds, path)
+        return True
+    except OSError as err:
+        if warn:
+            warnings.warn(f"the case archive {err.filename} could not be written ({err.strerror or err}): the study "
+                          "goes on without keeping its cases (a study run again recomputes them)", RuntimeWarning,
+                          stacklevel=3)
+        return False
+
+
+def _numbers(where: str, **values) -> None:
+    """Refuse a value that is neither None nor a number (a ParameterError naming it)."""
+    for name, value in values.items():
+        if value is not None and (isinstance(value, bool) or not isinstance(value, (int, float))):
+            raise ParameterError(f"{where}: {name} = {value!r}; give a number")
 
 
 def _base_scene(scene, overrides, grid, couple):

@@ -32,6 +32,7 @@ A case is never its own reference.
 from __future__ import annotations
 
 import json
+from typing import Protocol, runtime_checkable
 
 import numpy as np
 
@@ -263,11 +264,22 @@ def make(spec, scene, cases, axes, layout=None):
         for c in ref.cases():
             scene.with_(**c.values())  # checked before any work
         return ref
-    if not callable(spec) or not callable(getattr(type(spec), "stress", None)):
+    if not isinstance(spec, Solution):
         raise ParameterError(f"reference = {spec!r} ({type(spec).__name__}); allowed: 'finest', 'ode', 'exact', a dict "
                              "of discretisation values such as {'h': 0.005, 'k': 0.0005}, or a solution object "
                              "(solution(t, x) -> (u, beta) with a method stress(t))")
     return SolutionReference(lambda _scene: spec, describe=type(spec).__name__)
+
+
+@runtime_checkable
+class Solution(Protocol):
+    """What a Study accepts as an independent reference solution (e.g. :func:`workbench.references.rod_ode`'s)."""
+
+    def __call__(self, t, x=None):
+        """(u, beta) at the times ``t`` and the points ``x``."""
+
+    def stress(self, t):
+        """The stress at the times ``t``."""
 
 
 _EXTRAPOLATED = ("extrapolated (Richardson: each case against the next finer case of its series, the order fitted to "
