@@ -32,8 +32,13 @@ class _Figure(Figure):
 
 def figure(nrows=1, ncols=1, *, figsize=(5, 3.8), squeeze=True, **kw):
     """(Figure, axes) with constrained layout, outside pyplot."""
+    import numpy as np
+
     fig = _Figure(figsize=figsize, layout="constrained")
-    return fig, fig.subplots(nrows, ncols, squeeze=squeeze, **kw)
+    axes = fig.subplots(nrows, ncols, squeeze=squeeze, **kw)
+    for ax in np.ravel(axes):  # no additive offset ("+1.0002e3" at an axis' end): values are read as printed
+        ax.ticklabel_format(useOffset=False)
+    return fig, axes
 
 
 def _save(fig, path):
