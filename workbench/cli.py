@@ -377,12 +377,17 @@ def cmd_study(args) -> int:
         code, kept = _write_or_keep(ds, args.output)
         if code == 0:
             print(f"wrote {args.output} (cases in {archive}/)")
+    missing = False
     for norm in ("error", "error_V", "error_Q", "error_beta", "error_beta_end"):
         rates = ds.observed_order.sel(norm=norm)
-        found = {str(a): np.round(rates.sel(along=a).values.ravel(), 3).tolist() for a in rates.along.values
-                 if np.isfinite(rates.sel(along=a).values).any()}
+        found = {str(a): [round(float(r), 3) if np.isfinite(r) else "n/a" for r in rates.sel(along=a).values.ravel()]
+                 for a in rates.along.values if np.isfinite(rates.sel(along=a).values).any()}
         if found:
+            missing |= any("n/a" in v for v in found.values())
             print(f"observed order of {norm}: {found}")
+    if missing:
+        print("(n/a: no order to fit there: errors of 0, or, with the extrapolated reference, differences between "
+              "levels that do not fall)")
     o = st.overhead
     if o["new_cases"] or o["extended_cases"]:
         ran = f"{o['new_cases']} new case(s)" + (f" and continuing {o['extended_cases']} archived at a shorter T"
