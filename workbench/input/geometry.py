@@ -493,8 +493,9 @@ class HalfDisc(_Indenter):
         return {"dirichletx": "axis", "dirichlety_bbnd": "apex"}
 
     def default_probes(self):
+        """On the axis above the apex (the apex itself is held: its u is 0 by construction), and the top's corner."""
         R = self.extent[0]
-        return ((0.0, 0.0), (0.0, 0.5 * R), (0.0, R), (R, R))
+        return ((0.0, 0.1 * R), (0.0, 0.5 * R), (0.0, R), (R, R))
 
     def tractions(self, values):
         from ..expressions import parse
@@ -515,8 +516,9 @@ class Hemisphere(_Indenter):
         return {"dirichletx": "symx", "dirichlety": "symy", "dirichletz_bbbnd": "apex"}
 
     def default_probes(self):
+        """On the axis above the apex (the apex itself is held: its u is 0 by construction)."""
         R = self.extent[0]
-        return ((0.0, 0.0, 0.0), (0.0, 0.0, 0.5 * R), (0.0, 0.0, R))
+        return ((0.0, 0.0, 0.1 * R), (0.0, 0.0, 0.5 * R), (0.0, 0.0, R))
 
     def tractions(self, values):
         import ngsolve as ngs
