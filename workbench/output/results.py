@@ -387,8 +387,11 @@ def provenance(scene, extra: dict, call: str = "", terms=None) -> dict:
 
 
 def write(ds: xr.Dataset, path) -> Path:
-    """Write ``ds`` to netCDF atomically (:func:`workbench.output.files.atomic_write`); OSError naming ``path`` when it
-    cannot be written (a full disk, a folder without permission, a device)."""
+    """Write ``ds`` to netCDF atomically (:func:`workbench.output.files.atomic_write`).
+
+    A path that cannot be written and can be known so before writing (a folder, a device, /proc, a folder without
+    permission, a name too long) is a ParameterError; a failure while writing (a full disk) an OSError naming
+    ``path``, ``ds`` untouched."""
     from ..errors import ParameterError
     from .files import atomic_write, check_output
 

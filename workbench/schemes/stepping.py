@@ -305,10 +305,11 @@ class AdaptiveSteps:
             new = k * max(0.2, 0.9 * err ** (-1.0 / self.order))
         if new < self.k_min * (1 - 1e-9) or (new <= self.k_min and k <= self.k_min * (1 + 1e-9)):
             why = "the nonlinear solve failed" if failed else f"the scaled local error is {err:.3g}"
-            floor = " (the smallest step time resolves here)" if self.k_min == self.k_floor else ""
-            raise StepTooSmall(f"error control needs a step below k_min = {self.k_min:.3g} s{floor} at t = {self.t:.6g} s "
-                               f"({why} with k = {k:.3g} s): loosen rtol/atol, lower k_min, or check the "
-                               "scene", time=self.t)
+            floor = self.k_min == self.k_floor
+            raise StepTooSmall(f"error control needs a step below k_min = {self.k_min:.3g} s"
+                               f"{' (the smallest step time resolves here)' if floor else ''} at t = {self.t:.6g} s "
+                               f"({why} with k = {k:.3g} s): loosen rtol/atol, {'' if floor else 'lower k_min, '}"
+                               "or check the scene", time=self.t)
         self.k = new if theta is not None else self._quantize(new)
 
     def judge(self, err, theta, crossed=0.0) -> bool:
