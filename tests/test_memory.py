@@ -212,7 +212,8 @@ def test_rod_loaded_at_t0_against_volterra(order_of):
     assert errs[-1] > 1e-7 and order_of(ks, errs) >= 0.9 and errs[-1] < 1e-3
 
 
-def test_slab_loaded_at_t0_against_independent_qp():
+@pytest.mark.parametrize("contact_solver", ["condensed", "coupled"])
+def test_slab_loaded_at_t0_against_independent_qp(contact_solver):
     """memory_slab with the load already on at t = 0: u(0) minimises the static energy
     1/2 u.K u - f.u + sum_i w_i psi(s_i) subject to s_i = -u_y <= gap at the contact vertices.
     Reference: that program over all dofs, assembled here independently of workbench (plane-stress
@@ -222,7 +223,8 @@ def test_slab_loaded_at_t0_against_independent_qp():
     from scipy.optimize import minimize
 
     load = "(0, -60*(0.5 + t)*ifpos(x - 1, 1, -0.25))"
-    ds = workbench.run("memory_slab", h=0.25, k=0.25, traction_top=load, snapshots="0", progress=False)
+    ds = workbench.run("memory_slab", h=0.25, k=0.25, traction_top=load, snapshots="0", progress=False,
+                       contact_solver=contact_solver)
     mesh = ngs.Mesh(ngs.meshes.MakeStructured2DMesh(quads=False, nx=8, ny=4, mapping=lambda x, y: (2 * x, y)).ngmesh)
     fes = ngs.VectorH1(mesh, order=1, dirichlet="left")
     u, w = fes.TnT()

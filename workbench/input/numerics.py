@@ -34,6 +34,8 @@ class Registered(NamedTuple):
     iterative: bool = False
     #: Whether it runs on a body distributed over several MPI processes.
     distributed: bool = False
+    #: Whether its contact problem can be solved on the whole body (``contact_solver = 'coupled'``).
+    coupled: bool = False
 
 
 #: The time schemes by name. Registering a scheme is one line here; the scene's choices of ``scheme``, each model's
@@ -43,13 +45,13 @@ SCHEMES = {
                            distributed=True),
     "implicit": Registered("A", "implicit_euler", "ImplicitEuler"),
     "bdf2": Registered("A", "bdf2", "BDF2"),
-    "vi": Registered("B", "memory_vi", "MemoryVI"),
+    "vi": Registered("B", "memory_vi", "MemoryVI", coupled=True),
 }
 
 #: The element size and order (a geometry adds its cell counts, ``nx`` ..., and a Hertz body ``h_contact``).
 SPACE = ("h", "order")
-#: The time scheme, its step and the linear solver of its systems.
-TIME = ("k", "scheme", "solver")
+#: The time scheme, its step and the solvers of its systems (the linear one and the contact problem's).
+TIME = ("k", "scheme", "solver", "contact_solver")
 #: Error-controlled steps (``rtol > 0``): the tolerances and the bounds of the step.
 CONTROL = ("rtol", "atol", "k_min", "k_max")
 #: The explicit scheme's stability override.
@@ -94,6 +96,7 @@ class Numerics:
     T: float
     order: int = 1
     solver: str = "auto"
+    contact_solver: str = "auto"
     rtol: float = 0.0
     atol: float = 1e-9
     k_min: float = 1e-9

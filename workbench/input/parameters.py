@@ -70,6 +70,11 @@ _TABLE: dict[str, Param] = {p.name: p for p in [
        "sparsecholesky or umfpack, or cg (AMG-preconditioned conjugate gradients, explicit scheme only); auto = banded "
        "when the bandwidth is small, cg for the explicit scheme in 3D when a sparse factor would exceed 2 GB",
        "choice", choices=("auto", "banded", "sparsecholesky", "umfpack", "cg")),
+    _p("contact_solver", "auto", "", "how an implicit step's contact problem is solved: condensed (the dense contact "
+       "stiffness, one solve per contact point: fast for a few hundred points) or coupled (on the whole body, "
+       "conjugate gradients on the active contact points, one back-substitution each: for thousands of points, "
+       "3D); auto = coupled when the contact points outnumber 40 x the steps, or 5000", "choice",
+       choices=("auto", "condensed", "coupled")),
     # material
     _p("E", 1000.0, "Pa", "Young's modulus (elasticity G)", **_POS),
     _p("nu", 0.3, "1", "Poisson's ratio (elasticity G)", lower=-1.0, upper=0.5, lower_open=True, upper_open=True),

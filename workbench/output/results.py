@@ -61,6 +61,8 @@ VARIABLES = {
     "error_estimate": ("1", "scaled local error estimate of the step (<= 1: within rtol, atol)"),
     "coupling_passes": ("1", "passes of the (u, beta) coupling iteration in the time step"),
     "iterations": ("1", "active-set iterations in the time step"),
+    "linear_iterations": ("1", "conjugate gradient iterations on the active contact points in the time step "
+                          "(contact_solver = 'coupled')"),
     "linear_solves": ("1", "linear solves in the time step (back-substitutions and active-set solves)"),
     "n_separated": ("1", "contact nodes separated (u_nu < 0)"),
     "n_stuck": ("1", "contact nodes at the layer surface below its yield limit (u_nu = 0)"),

@@ -28,9 +28,13 @@ initial gap g0 taken off. u(0) solves the inequality at t = 0 (no memory yet).
 The memory rules are objects (:mod:`.memory_rules`), and so are the contact points with their
 active set (:mod:`.contact_nodes`); this scheme puts them together.
 
-Solver, with no parameter to tune: the elastic matrix K_A (with the trapezoid rule:
-K_A plus the current step's memory part) is factored once and condensed onto the
-contact vertices' normal dofs (S0 = (K_A^-1)_CC, once per operator); a step costs one back-substitution for the contact-free displacement z,
+Solver (``contact_solver``): the elastic matrix K_A (with the trapezoid rule:
+K_A plus the current step's memory part) is factored once. ``condensed``: it is
+condensed onto the contact vertices' normal dofs (S0 = (K_A^-1)_CC, one back-substitution per
+contact point and operator); ``coupled``: S0 is never formed, each state's system is solved by
+conjugate gradients on the active points, one back-substitution per iteration
+(:mod:`.coupled_contact`; for thousands of contact points, 3D); ``auto`` picks by the cost of each
+(:attr:`MemoryVI.coupled_per_step`). Condensed, a step costs one back-substitution for the contact-free displacement z,
 a primal-dual active-set iteration on the contact nodes (states separated /
 stuck / compliant / rigid, :mod:`workbench.physics.unilateral`; each iteration
 one small dense solve, exact once the states are right, warm-started from the
@@ -45,10 +49,11 @@ from collections import OrderedDict
 import numpy as np
 
 from ..discrete import solvers
-from ..discrete.condensation import CondensedSystem
+from ..discrete.condensation import CondensedSystem, SchurOperator, matrix_diagonal
 from ..physics import unilateral
 from .base import ErrorControlled, Observer, Scheme, first_event
 from .contact_nodes import ContactNodes
+from .coupled_contact import CoupledActiveSet
 from .memory_rules import rule_for
 
 
@@ -57,6 +62,12 @@ class MemoryVI(ErrorControlled, Scheme):
 
     name = "vi"
     cache_size = 4
+    #: ``contact_solver = 'auto'`` solves on the whole body when the contact points outnumber ``coupled_per_step``
+    #: times the steps (T / k), or ``coupled_from`` (the condensed solver's dense matrices: 8 m^2 bytes per operator).
+    #: The condensed one pays one back-substitution per point and operator, the coupled one about 40 per step
+    #: (measured, ``studies/contact_solver.py``: the block at 440 points and 52 steps, condensed 29 s, coupled 102 s;
+    #: the hemisphere at 1291 points and 4 steps, 18 s and 3.9 s).
+    coupled_per_step, coupled_from = 40, 5000
     state_variables = {
         "histories": ("", "restart state: memory histories H_i (vi), dof vectors"),
         "times": ("s", "restart state: times of the stored steps (vi, general kernel)"),
@@ -70,6 +81,10 @@ class MemoryVI(ErrorControlled, Scheme):
         self.trapezoid = d.numerics.memory_rule == "trapezoid"
         self.order = 2 if self.trapezoid else 1
         self.nodes = ContactNodes(d)
+        choice = d.numerics.contact_solver
+        steps = max(1.0, d.numerics.T / d.numerics.k)
+        many = self.nodes.size >= min(self.coupled_per_step * steps, self.coupled_from)
+        self.coupled = CoupledActiveSet(self.nodes) if choice == "coupled" or (choice == "auto" and many) else None
         self.memory = rule_for(d, self.trapezoid)  # (None without memory)
         self.pinned = d.pinned_nodes
         self._balance = None  # f - memory of the last equilibrium (only for the reaction of pinned contact nodes)
@@ -87,7 +102,8 @@ class MemoryVI(ErrorControlled, Scheme):
         """Records how a general kernel was approximated by exponentials (its terms and error bound)."""
         memory = self.d.model.memory
         fit = memory.fit if memory is not None else None
-        return {} if fit is None else {"kernel_terms": fit["terms"], "kernel_fit_error": fit["error"]}
+        used = {"contact_solver_used": "coupled" if self.coupled is not None else "condensed"}
+        return used if fit is None else used | {"kernel_terms": fit["terms"], "kernel_fit_error": fit["error"]}
 
     # -- the operator of a step -------------------------------------------------------------------------------
     def _use(self, k: float) -> None:
@@ -104,17 +120,34 @@ class MemoryVI(ErrorControlled, Scheme):
                 for wi, si, (K, _, _) in zip(weights, self.memory.scales, d.memory):
                     vec.data += (wi * si) * K.mat.AsVector()
             solver = solvers.factor(M, d.fes.FreeDofs(), d.u.vec, d.numerics.solver)
-            S_inv = CondensedSystem(solver, d.ndof, self.nodes.C, B=self.nodes.B).S0_inv  # (P1: sign^2 = 1)
+            nodes = self.nodes
+            schur = SchurOperator(solver, d.ndof, nodes.C, nodes.sign, matrix_diagonal(M), nodes.B) \
+                if self.coupled is not None else None
+            S_inv = None if schur is not None else self._condense(solver)
             # z = s + rho lam / S_ii-scaled: the prox scaling comes from the body's own stiffness. A large factor
             # predicts the states from the contact force (measured: factor 1 cycles on memory_slab, 10 and 100 settle)
-            rho = 100.0 / np.diag(S_inv) if self.nodes.size else np.zeros(0)
-            self._operators[key] = (M, solver, S_inv, rho)
+            stiffness = schur.stiffness if schur is not None else np.diag(S_inv)
+            rho = 100.0 / stiffness if nodes.size else np.zeros(0)
+            self._operators[key] = [M, solver, S_inv, rho, schur]
             while len(self._operators) > self.cache_size:
                 self._operators.popitem(last=False)
         else:
             self._operators.move_to_end(key)
-        self.M, self.solver, self.S_inv, self.rho = self._operators[key]
+        self.M, self.solver, self.S_inv, self.rho, self.schur = self._operators[key]
         self._weights = weights
+
+    def _condense(self, solver):
+        """The dense contact stiffness S^-1 = (B K^-1 B^T)^-1, one back-substitution per contact point."""
+        return CondensedSystem(solver, self.d.ndof, self.nodes.C, B=self.nodes.B).S0_inv  # (P1: sign^2 = 1)
+
+    def _condensed_fallback(self):
+        """(S_inv, rho) of the current operator for the condensed solver, built once (the coupled solve's fallback)."""
+        entry = next(e for e in self._operators.values() if e[1] is self.solver)
+        if entry[2] is None:
+            entry[2] = self._condense(self.solver)
+            entry[3] = 100.0 / np.diag(entry[2])
+        self.S_inv = entry[2]
+        return entry[2], entry[3]
 
     # -- steps ----------------------------------------------------------------------------------------------------
     def start(self, t0: float) -> None:
@@ -154,7 +187,13 @@ class MemoryVI(ErrorControlled, Scheme):
             self.z[d.dirichlet_dofs] = d.dirichlet_value(time)
         solves, iterations = 1, 0
         if nodes.size:
-            s, lam, iterations = nodes.solve(self.S_inv, self.rho, nodes.distance(self.z), time)
+            if self.coupled is not None:
+                before = self.schur.applications
+                s, lam, iterations = self.coupled.solve(self.schur, self.rho, nodes.distance(self.z), time,
+                                                        self._condensed_fallback)
+                solves += self.schur.applications - before - iterations  # (all back-substitutions in the end)
+            else:
+                s, lam, iterations = nodes.solve(self.S_inv, self.rho, nodes.distance(self.z), time)
             if nodes.g0 is not None:  # (the layer's law acts on the distance to the foundation)
                 s = s + nodes.g0
             out = np.zeros(d.ndof)
@@ -171,6 +210,8 @@ class MemoryVI(ErrorControlled, Scheme):
             "n_separated": int(counts[0]), "n_stuck": int(counts[1]), "n_compliant": int(counts[2]),
             "n_rigid": int(counts[3]), "complementarity": nodes.complementarity(u, self.rho),
         }
+        if self.coupled is not None:
+            self.diag["linear_iterations"] = self.coupled.linear_iterations
 
     def diagnostics(self) -> dict:
         return dict(self.diag)

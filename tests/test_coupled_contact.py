@@ -1,0 +1,92 @@
+"""contact_solver = 'coupled': Model B's contact problem on the whole body, S = B K^-1 B^T never formed.
+
+The discrete problem is that of the condensed solver, so the two must agree to the solvers' tolerance on every
+body, element order, layer state and memory rule; the independent reference is the whole-body quadratic program of
+tests/test_memory.py (run here with the coupled solver too). The cost test asserts what the solver is for: far
+fewer back-substitutions than contact points (the condensed solver needs one per point before its first step).
+"""
+import numpy as np
+import pytest
+
+import workbench
+from workbench import ParameterError
+from workbench.schemes.coupled_contact import CoupledActiveSet
+
+CASES = {
+    "slab, all four states": ("memory_slab", dict(h=0.1, k=0.05)),
+    "slab P2 (midpoints, B)": ("memory_slab", dict(h=0.2, k=0.05, order=2)),
+    "slab, trapezoid memory": ("memory_slab", dict(h=0.2, k=0.05, memory_rule="trapezoid")),
+    "layer without hardening (c = 0)": ("memory_slab", dict(h=0.2, k=0.05, c=0.0, F=20.0)),
+    "rod": ("memory_rod", dict()),
+    "hemisphere (curved, held apex)": ("memory_hertz3d", dict(h_contact=0.04)),
+    "block": ("memory_block", dict(h=0.125, k=0.05)),
+}
+
+
+def _pair(name, overrides):
+    a = workbench.run(name, contact_solver="condensed", progress=False, **overrides)
+    b = workbench.run(name, contact_solver="coupled", progress=False, **overrides)
+    return a, b
+
+
+@pytest.mark.parametrize("case", list(CASES), ids=list(CASES))
+def test_coupled_equals_condensed(case):
+    name, overrides = CASES[case]
+    a, b = _pair(name, overrides)
+    assert a.attrs["contact_solver_used"] == "condensed" and b.attrs["contact_solver_used"] == "coupled"
+    np.testing.assert_array_equal(a.time.values, b.time.values)
+    scale = float(np.abs(a.u_contact).max())
+    assert scale > 0
+    assert float(np.abs(a.u_contact - b.u_contact).max()) <= 1e-8 * scale
+    p_scale = float(np.nanmax(np.abs(a.contact_pressure)))
+    assert float(np.nanmax(np.abs(a.contact_pressure - b.contact_pressure))) <= 1e-7 * p_scale
+    np.testing.assert_array_equal(a.contact_state.values, b.contact_state.values)
+    assert int(b.linear_iterations.sum()) > 0 and "linear_iterations" not in a
+
+
+def test_error_controlled_runs_agree_to_their_tolerance():
+    """Under error control the two solvers' round-off may tip a step decision (an event located a hair apart), so
+    the step sequences may part; the solutions at T agree within the tolerance."""
+    rtol = 1e-3
+    a, b = _pair("memory_slab", dict(h=0.2, memory_rule="trapezoid", rtol=rtol))
+    last_a, last_b = a.u_contact.isel(time=-1), b.u_contact.isel(time=-1)
+    assert float(np.abs(last_a - last_b).max()) <= rtol * float(np.abs(last_a).max())
+
+
+def test_all_four_states_are_met():
+    """The slab case above runs through every state of the layer (else it would not test them)."""
+    b = workbench.run("memory_slab", h=0.1, k=0.05, contact_solver="coupled", progress=False)
+    assert all(int(b[n].max()) > 0 for n in ("n_separated", "n_stuck", "n_compliant", "n_rigid"))
+
+
+def test_cycling_states_fall_back_on_the_condensed_solver(monkeypatch):
+    """Should the active set not settle, the step is finished by the condensed solver (whose projected Gauss-Seidel
+    converges from anywhere): forced here by allowing one iteration."""
+    monkeypatch.setattr(CoupledActiveSet, "max_iterations", 1)
+    a, b = _pair("memory_slab", dict(h=0.2, k=0.1))
+    assert float(np.abs(a.u_contact - b.u_contact).max()) <= 1e-8 * float(np.abs(a.u_contact).max())
+    assert int(b.iterations.max()) > 1
+
+
+def test_coupled_costs_fewer_solves_than_contact_points():
+    """The point of the coupled solver: the hemisphere at h_contact = 0.01 has about 1300 contact vertices, which the
+    condensed solver pays with as many back-substitutions before its first step; the coupled one solves the whole
+    run (from rest to the full load in 4 steps) with a fraction of that (measured: 290)."""
+    ds = workbench.run("memory_hertz3d", h_contact=0.01, progress=False)  # auto: coupled, >= 600 points
+    assert ds.attrs["contact_solver_used"] == "coupled"
+    points = int(np.isfinite(ds.contact_pressure.isel(time=-1)).sum())
+    assert points > 1000
+    assert int(ds.linear_solves.sum()) < 0.4 * points
+
+
+def test_auto_keeps_the_condensed_solver_for_few_points():
+    assert workbench.run("memory_slab", h=0.2, k=0.1, progress=False).attrs["contact_solver_used"] == "condensed"
+
+
+def test_model_a_refuses_coupled_with_the_allowed_values():
+    with pytest.raises(ParameterError) as err:
+        workbench.run("tp1", scheme="implicit", contact_solver="coupled", progress=False)
+    assert "contact_solver = 'coupled'" in str(err.value) and "'vi'" in str(err.value)
+    with pytest.raises(ParameterError) as err:
+        workbench.run("memory_slab", contact_solver="schur", progress=False)
+    assert "contact_solver" in str(err.value) and "coupled" in str(err.value)
