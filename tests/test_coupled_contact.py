@@ -1,4 +1,5 @@
-"""contact_solver = 'coupled': Model B's contact problem on the whole body, S = B K^-1 B^T never formed.
+"""contact_solver = 'coupled': the contact problem of an implicit step on the whole body, S = B K^-1 B^T never formed
+(Model B's active set, Model A's semismooth Newton).
 
 The discrete problem is that of the condensed solver, so the two must agree to the solvers' tolerance on every
 body, element order, layer state and memory rule; the independent reference is the whole-body quadratic program of
@@ -23,6 +24,16 @@ CASES = {
 }
 
 
+MODEL_A = {
+    "tp5, BDF2": ("tp5", dict(scheme="bdf2", k=0.005, T=0.2)),
+    "slab, tangential glue": ("slab", dict(scheme="implicit", c_tau=1.0, h=0.05, k=0.01, T=0.2)),
+    "tp4, point force (debonding)": ("tp4", dict(scheme="implicit", T=0.3)),
+    "stiff compliance (Hertz 2D, c_nu = 1e7)": ("hertz", dict(c_nu=1e7, tau=1e-3, k=0.05)),
+    "hemisphere": ("hertz3d", dict(k=0.1)),
+    "rod": ("tp3", dict(scheme="implicit", T=1.0)),
+}
+
+
 def _pair(name, overrides):
     a = workbench.run(name, contact_solver="condensed", progress=False, **overrides)
     b = workbench.run(name, contact_solver="coupled", progress=False, **overrides)
@@ -42,6 +53,20 @@ def test_coupled_equals_condensed(case):
     assert float(np.nanmax(np.abs(a.contact_pressure - b.contact_pressure))) <= 1e-7 * p_scale
     np.testing.assert_array_equal(a.contact_state.values, b.contact_state.values)
     assert int(b.linear_iterations.sum()) > 0 and "linear_iterations" not in a
+
+
+@pytest.mark.parametrize("case", list(MODEL_A), ids=list(MODEL_A))
+def test_model_a_coupled_equals_condensed(case):
+    """Model A (backward Euler, BDF2): the coupled Newton against the condensed one, u and beta."""
+    name, overrides = MODEL_A[case]
+    a, b = _pair(name, overrides)
+    assert a.attrs["contact_solver_used"] == "condensed" and b.attrs["contact_solver_used"] == "coupled"
+    scale = float(np.abs(a.u_contact).max())
+    assert scale > 0
+    assert float(np.abs(a.u_contact - b.u_contact).max()) <= 1e-8 * scale
+    if "beta" in a:
+        assert float(np.abs(a.beta - b.beta).max()) <= 1e-8
+    assert int(b.newton_iterations.sum()) > 0 and "linear_iterations" in b
 
 
 def test_error_controlled_runs_agree_to_their_tolerance():
@@ -83,10 +108,10 @@ def test_auto_keeps_the_condensed_solver_for_few_points():
     assert workbench.run("memory_slab", h=0.2, k=0.1, progress=False).attrs["contact_solver_used"] == "condensed"
 
 
-def test_model_a_refuses_coupled_with_the_allowed_values():
+def test_the_explicit_scheme_refuses_coupled_with_the_allowed_values():
     with pytest.raises(ParameterError) as err:
-        workbench.run("tp1", scheme="implicit", contact_solver="coupled", progress=False)
-    assert "contact_solver = 'coupled'" in str(err.value) and "'vi'" in str(err.value)
+        workbench.run("tp1", contact_solver="coupled", progress=False)
+    assert "contact_solver = 'coupled'" in str(err.value) and "'bdf2'" in str(err.value)
     with pytest.raises(ParameterError) as err:
         workbench.run("memory_slab", contact_solver="schur", progress=False)
     assert "contact_solver" in str(err.value) and "coupled" in str(err.value)

@@ -170,14 +170,14 @@ class RestrictedSide:
                 out = out + Tt @ (self.weights * p_tau[:, c])
         return out
 
-    def jacobian(self, slope_nu, slope_tau=None) -> np.ndarray:
-        """T_nu^T diag(w slope_nu) T_nu (+ the tangential blocks) as a dense |C| x |C| matrix."""
+    def jacobian(self, slope_nu, slope_tau=None, dense: bool = True):
+        """T_nu^T diag(w slope_nu) T_nu (+ the tangential blocks) as a |C| x |C| matrix, dense or sparse (CSR)."""
         J = (self.T_nu.T @ sp.diags(self.weights * slope_nu) @ self.T_nu)
         if slope_tau is not None:
             for a, Ta in enumerate(self.T_tau):
                 for b, Tb in enumerate(self.T_tau):
                     J = J + Ta.T @ sp.diags(self.weights * slope_tau[:, a, b]) @ Tb
-        return J.toarray()
+        return J.toarray() if dense else J.tocsr()
 
 
 def _point_dof(fes, mesh, name):

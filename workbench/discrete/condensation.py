@@ -13,6 +13,12 @@ semismooth Newton iteration on this |C|-dimensional SPD system
 (:class:`CondensedNewton`) needs no volume refactorisation; the volume field is
 recovered with one more solve, u = z - M^{-1} P f(u_C).
 
+Forming S0 costs |C| solves and a dense |C| x |C| factor: a wall in 3D, where |C| grows like n^(2/3).
+With ``contact_solver = 'coupled'`` S0 is only applied, one back-substitution a product
+(:class:`SchurOperator`), and the same Newton iteration runs on the contact force with its directions by
+conjugate gradients preconditioned by S0 (:class:`CoupledNewton`; Model B's active set:
+:mod:`workbench.schemes.coupled_contact`).
+
 Examples
 --------
 >>> import workbench
@@ -59,12 +65,12 @@ class ContactOperator:
         q = self.contact.tangential_traction(NP, self.side.u_tau(u_C), beta) if self.tangential else None
         return self.side.integrate(p, q)
 
-    def jacobian(self, u_C: np.ndarray) -> np.ndarray:
-        """df/du_C as a dense |C| x |C| matrix (semismooth: the active branch of each kink)."""
+    def jacobian(self, u_C: np.ndarray, dense: bool = True):
+        """df/du_C as a |C| x |C| matrix, dense or sparse (semismooth: the active branch of each kink)."""
         beta = self._beta()
         slope = self.contact.normal_slope(self.side.u_nu(u_C), beta, self.side.gap0)
         tslope = self.contact.tangential_slope(self.side.u_tau(u_C), beta) if self.tangential else None
-        return self.side.jacobian(slope, tslope)
+        return self.side.jacobian(slope, tslope, dense)
 
 
 class CondensedSystem:
@@ -106,10 +112,12 @@ class SchurOperator:
     (0.8, [2.0])
     """
 
-    def __init__(self, solver, ndof: int, C: np.ndarray, sign: float, diagonal: np.ndarray, B=None):
+    def __init__(self, solver, ndof: int, C: np.ndarray, sign: float = 1.0, diagonal=None, B=None):
         self.solver, self.ndof, self.C, self.sign, self.B = solver, ndof, C, sign, B
-        inverse = 1.0 / np.where(diagonal > 0, diagonal, np.inf)
-        self.stiffness = 1.0 / (inverse[C] if B is None else B.multiply(B) @ inverse)
+        self.stiffness = None
+        if diagonal is not None:
+            inverse = 1.0 / np.where(diagonal > 0, diagonal, np.inf)
+            self.stiffness = 1.0 / (inverse[C] if B is None else B.multiply(B) @ inverse)
         self._rhs, self._out = np.zeros(ndof), np.zeros(ndof)
         self.applications = 0
 
@@ -150,6 +158,8 @@ class CondensedNewton:
     |g| <= rtol * (scale of the terms summed in g).
     """
 
+    linear_iterations = 0  # (no inner iterations: one dense solve a Newton step)
+
     def __init__(self, condensed: CondensedSystem, operator: ContactOperator, rtol: float = 1e-10,
                  max_iterations: int = 40):
         self.condensed, self.op, self.rtol, self.max_iterations = condensed, operator, rtol, max_iterations
@@ -188,27 +198,113 @@ class CondensedNewton:
         raise NewtonFailed(f"{label}: semismooth Newton did not converge in {self.iterations} iterations "
                            f"at t = {time:.6g} s (residual {g_norm:.3g}); try a smaller k", time=time)
 
-    def _line_search(self, u_C, step, z_C, slope0, slope1, steps=80):
-        """A step a in (0, 1) with phi'(0) / 2 <= phi'(a) <= 0 by Illinois regula falsi on phi'(a) = g(u_C + a s) . s,
-        which is non-decreasing and piecewise linear (kinks where a contact term changes branch)."""
+    def _line_search(self, u_C, step, z_C, slope0, slope1):
+        """A step a in (0, 1) with phi'(0) / 2 <= phi'(a) <= 0 on phi'(a) = g(u_C + a s) . s (:func:`line_search`)."""
         S0_inv = self.condensed.S0_inv
-        a_lo, s_lo, a_hi, s_hi = 0.0, slope0, 1.0, slope1
-        a, side = 1.0, 0
-        for _ in range(steps):
-            a = a_lo - s_lo * (a_hi - a_lo) / (s_hi - s_lo)
-            s_a = float((S0_inv @ (u_C + a * step - z_C) + self.op.force(u_C + a * step)) @ step)
-            if 0.5 * slope0 <= s_a <= 0.0:
+        return line_search(lambda a: float((S0_inv @ (u_C + a * step - z_C) + self.op.force(u_C + a * step)) @ step),
+                           slope0, slope1)
+
+
+def line_search(slope, slope0: float, slope1: float, steps: int = 80) -> float:
+    """A step a in (0, 1) with slope0 / 2 <= slope(a) <= 0 by Illinois regula falsi on the directional derivative
+    ``slope(a)`` of a convex energy, which is non-decreasing and piecewise linear (kinks where a contact term changes
+    branch); slope(0) = slope0 < 0 < slope(1) = slope1."""
+    a_lo, s_lo, a_hi, s_hi = 0.0, slope0, 1.0, slope1
+    a, side = 1.0, 0
+    for _ in range(steps):
+        a = a_lo - s_lo * (a_hi - a_lo) / (s_hi - s_lo)
+        s_a = slope(a)
+        if 0.5 * slope0 <= s_a <= 0.0:
+            break
+        if s_a < 0:
+            a_lo, s_lo = a, s_a
+            if side == -1:
+                s_hi *= 0.5  # Illinois: the kept end stalled twice, halve its weight
+            side = -1
+        else:
+            a_hi, s_hi = a, s_a
+            if side == 1:
+                s_lo *= 0.5
+            side = 1
+        if a_hi - a_lo <= 1e-15 * max(1.0, a_hi):
+            break
+    return a
+
+
+class CoupledNewton:
+    """The semismooth Newton of :class:`CondensedNewton` without S0^{-1} (``contact_solver = 'coupled'``): S0 =
+    (M^{-1})_CC is applied by one back-substitution (:class:`SchurOperator`) and never formed.
+
+    The iterate is the contact force phi with u_C = z_C - S0 phi, so that S0^{-1} (u_C - z_C) = -phi and the residual
+    is g = f(u_C) - phi. A Newton direction solves (S0^{-1} + J) s = -g by conjugate gradients preconditioned by S0
+    itself (one back-substitution an iteration; the preconditioned operator is I + S0 J, so a soft compliance needs
+    one or two iterations), carrying s~ = S0^{-1} s along the recurrences, so phi is updated as phi - a s~ without
+    inverting S0. The inner solves stop at :attr:`inner` times their first residual (inexact Newton); the globalisation
+    is the line search of :class:`CondensedNewton` on the same convex energy. ``linear_iterations`` counts the inner
+    iterations. Started from the forces at the caller's guess of u_C.
+    """
+
+    inner = 1e-4
+
+    def __init__(self, schur: SchurOperator, operator: ContactOperator, rtol: float = 1e-10,
+                 max_iterations: int = 40):
+        self.schur, self.op, self.rtol, self.max_iterations = schur, operator, rtol, max_iterations
+        self.iterations = self.linear_iterations = 0
+
+    def solve(self, u_C: np.ndarray, z_C: np.ndarray, time: float, label: str = "") -> np.ndarray:
+        S, op = self.schur, self.op
+        phi = op.force(u_C)
+        u_C[:] = z_C - S.apply(phi)
+        f = op.force(u_C)
+        g_norm = np.inf
+        for it in range(self.max_iterations + 1):
+            g = f - phi
+            g_norm = np.abs(g).max()
+            if not np.isfinite(g_norm):
                 break
-            if s_a < 0:
-                a_lo, s_lo = a, s_a
-                if side == -1:
-                    s_hi *= 0.5  # Illinois: the kept end stalled twice, halve its weight
-                side = -1
-            else:
-                a_hi, s_hi = a, s_a
-                if side == 1:
-                    s_lo *= 0.5
-                side = 1
-            if a_hi - a_lo <= 1e-15 * max(1.0, a_hi):
+            if g_norm <= self.rtol * max(np.abs(phi).max(), np.abs(f).max(), 1e-300):
+                return f
+            if it == self.max_iterations:
                 break
-        return a
+            step, step_t = self._direction(op.jacobian(u_C, dense=False), -g)
+            self.iterations += 1
+            slope0 = float(g @ step)
+            f_new = op.force(u_C + step)
+            slope1 = float((f_new - phi + step_t) @ step)
+            alpha = 1.0 if slope1 <= 1e-3 * abs(slope0) else self._search(u_C, phi, step, step_t, slope0, slope1)
+            u_C += alpha * step
+            phi -= alpha * step_t
+            f = f_new if alpha == 1.0 else op.force(u_C)
+            if np.abs(step).max() <= 1e-14 * (np.abs(u_C).max() + np.abs(z_C).max()):
+                return f
+        raise NewtonFailed(f"{label}: semismooth Newton (coupled) did not converge in {self.iterations} iterations "
+                           f"at t = {time:.6g} s (residual {g_norm:.3g}); try a smaller k", time=time)
+
+    def _direction(self, J, b):
+        """(s, S0^{-1} s) with (S0^{-1} + J) s = b, by conjugate gradients preconditioned by S0 (class docs)."""
+        S = self.schur
+        x, x_t = np.zeros_like(b), np.zeros_like(b)
+        r = b.copy()
+        z = S.apply(r)
+        p, p_t = z.copy(), r.copy()
+        rz = float(r @ z)
+        first = np.sqrt(abs(rz))
+        for _ in range(max(50, b.size)):
+            q = p_t + J @ p
+            a = rz / float(p @ q)
+            x += a * p
+            x_t += a * p_t
+            r -= a * q
+            self.linear_iterations += 1
+            z = S.apply(r)
+            rz, rz_old = float(r @ z), rz
+            if np.sqrt(abs(rz)) <= self.inner * first:
+                break
+            beta = rz / rz_old
+            p = z + beta * p
+            p_t = r + beta * p_t
+        return x, x_t
+
+    def _search(self, u_C, phi, step, step_t, slope0, slope1):
+        """The line search with g(u_C + a s) . s = (f(u_C + a s) - phi + a s~) . s."""
+        return line_search(lambda a: float((self.op.force(u_C + a * step) - phi + a * step_t) @ step), slope0, slope1)

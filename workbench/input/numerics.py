@@ -43,8 +43,8 @@ class Registered(NamedTuple):
 SCHEMES = {
     "explicit": Registered("A", "explicit_euler", "ExplicitEuler", error_control=False, iterative=True,
                            distributed=True),
-    "implicit": Registered("A", "implicit_euler", "ImplicitEuler"),
-    "bdf2": Registered("A", "bdf2", "BDF2"),
+    "implicit": Registered("A", "implicit_euler", "ImplicitEuler", coupled=True),
+    "bdf2": Registered("A", "bdf2", "BDF2", coupled=True),
     "vi": Registered("B", "memory_vi", "MemoryVI", coupled=True),
 }
 
@@ -68,6 +68,14 @@ DISCRETISATION = frozenset(SPACE + TIME + CONTROL + EXPLICIT + MEMORY + MESH)
 REFINEMENT = ("h", "k", "rtol", "h_contact")
 #: The axes every study has (length 1 when not swept), and the command line's named options besides T.
 AXES = ("h", "k", "order", "scheme")
+
+
+#: ``contact_solver = 'auto'`` solves on the whole body when the contact unknowns outnumber COUPLED_PER_STEP times
+#: the steps (T / k), or COUPLED_FROM (the condensed solver's dense matrices: 8 m^2 bytes each). The condensed solver
+#: pays one back-substitution per unknown and operator, the coupled one about 40 per step (measured,
+#: ``studies/contact_solver.py``: the block at 440 points and 52 steps, condensed 29 s, coupled 102 s; the hemisphere
+#: at 1291 points and 4 steps, 18 s and 3.9 s).
+COUPLED_PER_STEP, COUPLED_FROM = 40, 5000
 
 
 def schemes_of(model: str) -> tuple:
@@ -109,6 +117,17 @@ class Numerics:
     def adaptive(self) -> bool:
         """Whether the steps are error-controlled."""
         return is_adaptive(self.rtol)
+
+    def coupled_contact(self, unknowns: int) -> bool:
+        """Whether a contact problem of ``unknowns`` contact unknowns is solved on the whole body (``contact_solver``;
+        ``auto``: :data:`COUPLED_PER_STEP`).
+
+        >>> Numerics("vi", k=0.25, T=1.0).coupled_contact(203), Numerics("vi", k=0.02, T=1.0).coupled_contact(440)
+        (True, False)
+        """
+        if self.contact_solver != "auto":
+            return self.contact_solver == "coupled"
+        return unknowns >= min(COUPLED_PER_STEP * max(1.0, self.T / self.k), COUPLED_FROM)
 
     @property
     def largest_step(self) -> float:

@@ -402,8 +402,9 @@ def _check_consistency(name, body, v, model="A"):
                              f"solver = 'auto' (a direct factor)" + (f" or scheme = {iterative}" if iterative else ""))
     if v["contact_solver"] == "coupled" and not scheme.coupled:
         coupled = " | ".join(repr(n) for n, e in SCHEMES.items() if e.coupled)
-        raise ParameterError(f"contact_solver = 'coupled' applies to the scheme(s) {coupled} so far; scheme = "
-                             f"{v['scheme']!r} takes contact_solver = 'auto' or 'condensed'")
+        raise ParameterError(f"contact_solver = 'coupled' applies to the schemes that solve a contact problem each "
+                             f"step ({coupled}); scheme = {v['scheme']!r} takes its contact forces from the last step: "
+                             "leave contact_solver = 'auto'")
     if v["k"] > v["T"]:
         raise ParameterError(f"k = {v['k']:g} is larger than T = {v['T']:g}; allowed: 0 < k <= T")
     if is_adaptive(v["rtol"]):

@@ -40,7 +40,7 @@ from collections import OrderedDict
 import numpy as np
 
 from ..discrete import solvers
-from ..discrete.condensation import CondensedNewton, CondensedSystem, ContactOperator
+from ..discrete.condensation import CondensedNewton, CondensedSystem, ContactOperator, CoupledNewton, SchurOperator
 from ..physics.ops import NP
 from .base import ErrorControlled
 from .model_a import KelvinVoigtScheme, kink_event
@@ -77,13 +77,16 @@ class ImplicitEuler(ErrorControlled, KelvinVoigtScheme):
         self.u_prev = np.zeros(d.ndof)
         self.lift = d.u.vec.CreateVector()
         self.op = ContactOperator(d) if d.side is not None else None
+        self.coupled = self.op is not None and d.numerics.coupled_contact(self.op.size)
         self.bonding = d.model.bonding
         self._factors = OrderedDict()
+        self.newton = None  # (the step's, from _prepare)
         self.iterations = self.passes = 0
         self.resolved = True
 
     def preflight(self, k_max: float) -> dict:
-        return self.bonding_check(k_max)
+        used = {"contact_solver_used": "coupled" if self.coupled else "condensed"} if self.op is not None else {}
+        return self.bonding_check(k_max) | used
 
     # -- the multistep formula -------------------------------------------------------------------------------
     def coefficients(self, k: float):
@@ -117,8 +120,11 @@ class ImplicitEuler(ErrorControlled, KelvinVoigtScheme):
             M = d.viscous.mat.CreateMatrix()
             M.AsVector().data = built_from * d.viscous.mat.AsVector() + d.elastic.mat.AsVector()
             solver = solvers.factor(M, d.fes.FreeDofs(), d.u.vec, d.scene["solver"])
-            newton = CondensedNewton(CondensedSystem(solver, d.ndof, self.op.C), self.op) \
-                if self.op is not None and self.op.size else None
+            newton = None
+            if self.op is not None and self.op.size and self.coupled:
+                newton = CoupledNewton(SchurOperator(solver, d.ndof, self.op.C), self.op)
+            elif self.op is not None and self.op.size:
+                newton = CondensedNewton(CondensedSystem(solver, d.ndof, self.op.C), self.op)
             self._factors[key] = (M, solver, newton, built_from)
             while len(self._factors) > self.cache_size:
                 self._factors.popitem(last=False)
@@ -193,7 +199,7 @@ class ImplicitEuler(ErrorControlled, KelvinVoigtScheme):
         if beta is not None and self.resolved:
             self._predict_beta(k, beta_old)  # drops beta by at most e^-0.1 here
             passes = 1
-        self.newton.iterations = 0
+        self.newton.iterations = self.newton.linear_iterations = 0
         for self.passes in range(1, passes + 1):
             f_C = self.newton.solve(u_C, z_C, t_next, d.scene.name)
             if beta is None:
@@ -230,7 +236,10 @@ class ImplicitEuler(ErrorControlled, KelvinVoigtScheme):
                                                                              k)
 
     def diagnostics(self) -> dict:
-        return {"newton_iterations": self.iterations, "coupling_passes": self.passes}
+        out = {"newton_iterations": self.iterations, "coupling_passes": self.passes}
+        if self.coupled:
+            out["linear_iterations"] = self.newton.linear_iterations if self.newton is not None else 0
+        return out
 
     def event(self, start: dict):
         """Where in the last step the contact and bonding laws' kinks were crossed (:func:`.model_a.kink_event`)."""

@@ -34,7 +34,7 @@ condensed onto the contact vertices' normal dofs (S0 = (K_A^-1)_CC, one back-sub
 contact point and operator); ``coupled``: S0 is never formed, each state's system is solved by
 conjugate gradients on the active points, one back-substitution per iteration
 (:mod:`.coupled_contact`; for thousands of contact points, 3D); ``auto`` picks by the cost of each
-(:attr:`MemoryVI.coupled_per_step`). Condensed, a step costs one back-substitution for the contact-free displacement z,
+(:meth:`workbench.input.numerics.Numerics.coupled_contact`). Condensed, a step costs one back-substitution for the contact-free displacement z,
 a primal-dual active-set iteration on the contact nodes (states separated /
 stuck / compliant / rigid, :mod:`workbench.physics.unilateral`; each iteration
 one small dense solve, exact once the states are right, warm-started from the
@@ -62,12 +62,6 @@ class MemoryVI(ErrorControlled, Scheme):
 
     name = "vi"
     cache_size = 4
-    #: ``contact_solver = 'auto'`` solves on the whole body when the contact points outnumber ``coupled_per_step``
-    #: times the steps (T / k), or ``coupled_from`` (the condensed solver's dense matrices: 8 m^2 bytes per operator).
-    #: The condensed one pays one back-substitution per point and operator, the coupled one about 40 per step
-    #: (measured, ``studies/contact_solver.py``: the block at 440 points and 52 steps, condensed 29 s, coupled 102 s;
-    #: the hemisphere at 1291 points and 4 steps, 18 s and 3.9 s).
-    coupled_per_step, coupled_from = 40, 5000
     state_variables = {
         "histories": ("", "restart state: memory histories H_i (vi), dof vectors"),
         "times": ("s", "restart state: times of the stored steps (vi, general kernel)"),
@@ -81,10 +75,7 @@ class MemoryVI(ErrorControlled, Scheme):
         self.trapezoid = d.numerics.memory_rule == "trapezoid"
         self.order = 2 if self.trapezoid else 1
         self.nodes = ContactNodes(d)
-        choice = d.numerics.contact_solver
-        steps = max(1.0, d.numerics.T / d.numerics.k)
-        many = self.nodes.size >= min(self.coupled_per_step * steps, self.coupled_from)
-        self.coupled = CoupledActiveSet(self.nodes) if choice == "coupled" or (choice == "auto" and many) else None
+        self.coupled = CoupledActiveSet(self.nodes) if d.numerics.coupled_contact(self.nodes.size) else None
         self.memory = rule_for(d, self.trapezoid)  # (None without memory)
         self.pinned = d.pinned_nodes
         self._balance = None  # f - memory of the last equilibrium (only for the reaction of pinned contact nodes)
