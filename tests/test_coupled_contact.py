@@ -115,3 +115,40 @@ def test_the_explicit_scheme_refuses_coupled_with_the_allowed_values():
     with pytest.raises(ParameterError) as err:
         workbench.run("memory_slab", contact_solver="schur", progress=False)
     assert "contact_solver" in str(err.value) and "coupled" in str(err.value)
+
+
+def test_remembered_directions_cut_the_iterations(monkeypatch):
+    """The Krylov memory (deflated CG): on the block's 40 steps, far fewer iterations than without it (measured:
+    369 against 1398 at h = 0.1), to the same solution."""
+    from workbench.schemes import coupled_contact
+
+    with_memory = workbench.run("memory_block", h=0.125, k=0.05, contact_solver="coupled", progress=False)
+    monkeypatch.setattr(coupled_contact.KrylovMemory, "remember", lambda self, schur, p, S_p: None)
+    without = workbench.run("memory_block", h=0.125, k=0.05, contact_solver="coupled", progress=False)
+    assert int(with_memory.linear_iterations.sum()) < 0.6 * int(without.linear_iterations.sum())
+    scale = float(np.abs(without.u_contact).max())
+    assert float(np.abs(with_memory.u_contact - without.u_contact).max()) <= 1e-8 * scale
+
+
+def test_spoiled_remembered_directions_are_dropped(monkeypatch):
+    """Directions that are not A-orthonormal (as rounding can leave them) make the deflated iteration diverge; the
+    solve restarts without them and still reaches the condensed solution."""
+    from workbench.schemes import coupled_contact
+
+    basis = coupled_contact.KrylovMemory.basis
+
+    def spoiled(self, schur, unknown, D):
+        V, AV, SV = basis(self, schur, unknown, D)
+        return V, 1.5 * AV, SV  # (V^T A V = 1.5 I: the projections are wrong)
+
+    forget, dropped = coupled_contact.KrylovMemory.forget, []
+
+    def counted(self):
+        dropped.append(1)
+        forget(self)
+
+    monkeypatch.setattr(coupled_contact.KrylovMemory, "basis", spoiled)
+    monkeypatch.setattr(coupled_contact.KrylovMemory, "forget", counted)
+    a, b = _pair("memory_slab", dict(h=0.1, k=0.05))
+    assert dropped  # (the safeguard ran)
+    assert float(np.abs(a.u_contact - b.u_contact).max()) <= 1e-8 * float(np.abs(a.u_contact).max())

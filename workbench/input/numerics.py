@@ -72,10 +72,10 @@ AXES = ("h", "k", "order", "scheme")
 
 #: ``contact_solver = 'auto'`` solves on the whole body when the contact unknowns outnumber COUPLED_PER_STEP times
 #: the steps (T / k), or COUPLED_FROM (the condensed solver's dense matrices: 8 m^2 bytes each). The condensed solver
-#: pays one back-substitution per unknown and operator, the coupled one about 40 per step (measured,
-#: ``studies/contact_solver.py``: the block at 440 points and 52 steps, condensed 29 s, coupled 102 s; the hemisphere
+#: pays one back-substitution per unknown and operator, the coupled one about 20 per step (measured,
+#: ``studies/contact_solver.py``: the block at 440 points and 52 steps, condensed 28 s, coupled 49 s; the hemisphere
 #: at 1291 points and 4 steps, 18 s and 3.9 s).
-COUPLED_PER_STEP, COUPLED_FROM = 40, 5000
+COUPLED_PER_STEP, COUPLED_FROM = 20, 5000
 
 
 def schemes_of(model: str) -> tuple:

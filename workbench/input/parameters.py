@@ -73,7 +73,7 @@ _TABLE: dict[str, Param] = {p.name: p for p in [
     _p("contact_solver", "auto", "", "how an implicit step's contact problem is solved: condensed (the dense contact "
        "stiffness, one solve per contact point: fast for a few hundred points) or coupled (on the whole body, "
        "conjugate gradients on the active contact points, one back-substitution each: for thousands of points, "
-       "3D); auto = coupled when the contact points outnumber 40 x the steps, or 5000", "choice",
+       "3D); auto = coupled when the contact points outnumber 20 x the steps, or 5000", "choice",
        choices=("auto", "condensed", "coupled")),
     # material
     _p("E", 1000.0, "Pa", "Young's modulus (elasticity G)", **_POS),

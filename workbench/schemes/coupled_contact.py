@@ -52,6 +52,7 @@ class CoupledActiveSet:
     def __init__(self, nodes):
         self.nodes = nodes
         self.linear_iterations = 0
+        self.memory = KrylovMemory()
 
     def solve(self, schur, rho, s_free: np.ndarray, time: float, fallback):
         """(s, lam, iterations) as :meth:`ContactNodes.solve`; ``fallback()`` returns the condensed (S_inv, rho) when
@@ -119,28 +120,108 @@ class CoupledActiveSet:
         if U.size == 0:
             return x, S_x
         r = b[U] - S_x[U] - D[U] * x[U]
-        precondition = 1.0 / (1.0 / schur.stiffness[U] + D[U])
         # loose: relative to the first residual (the states' correction); tight: to the displacements' scale
         scale = max(np.abs(b[U]).max(), 1e-300) if tol == self.tight else max(np.abs(r).max(), 1e-300)
-        z = precondition * r
-        p, rz = z.copy(), float(r @ z)
+        V, AV, SV = self.memory.basis(schur, unknown, D)
+        if V.shape[1]:  # the remembered directions' part of the solution, exactly (V^T A V = I)
+            mu = V.T @ r
+            x[U] += V @ mu
+            S_x += SV @ mu
+            r -= AV @ mu
+        return self._conjugate_gradients(schur, (U, b[U], D[U]), x, S_x, r, (V, AV), tol * scale, time)
+
+    def _conjugate_gradients(self, schur, system, x, S_x, r, deflation, tol, time):
+        """Preconditioned CG on the points U of ``system`` = (U, b_U, D_U), deflated by (V, A V), from x (S x and the
+        residual r alongside) to max |r| <= tol; (x, S x)."""
+        U, b, D = system
+        V, AV = deflation
+        w = x.size
+        precondition = 1.0 / (1.0 / schur.stiffness[U] + D)
         limit = max(200, 2 * U.size)
-        for _ in range(limit):
-            if np.abs(r).max() <= tol * scale:
-                return x, S_x
-            full = np.zeros(len(w))
-            full[U] = p
-            S_p = schur.apply(full)
-            self.linear_iterations += 1
-            q = S_p[U] + D[U] * p
-            a = rz / float(p @ q)
-            x[U] += a * p
-            S_x += a * S_p
-            r -= a * q
+        for _ in range(2):
             z = precondition * r
-            rz, rz_old = float(r @ z), rz
-            p = z + (rz / rz_old) * p
-        residual = np.abs(r).max() / scale
+            p, rz = z - V @ (AV.T @ z), float(r @ z)
+            best = np.abs(r).max()
+            for _ in range(limit):
+                size = np.abs(r).max()
+                if size <= tol:
+                    r = b - S_x[U] - D * x[U]  # the true residual (S x is kept alongside): the recursion may drift
+                    if np.abs(r).max() <= tol:
+                        return x, S_x
+                    break
+                if size > 100.0 * best:
+                    break  # diverging (rounding in the remembered directions): again without them
+                best = min(best, size)
+                full = np.zeros(w)
+                full[U] = p
+                S_p = schur.apply(full)
+                self.memory.remember(schur, full, S_p)
+                self.linear_iterations += 1
+                q = S_p[U] + D * p
+                a = rz / float(p @ q)
+                x[U] += a * p
+                S_x += a * S_p
+                r -= a * q
+                z = precondition * r
+                rz, rz_old = float(r @ z), rz
+                p = z + (rz / rz_old) * p - V @ (AV.T @ z)  # (deflated: A-orthogonal to the remembered directions)
+            if not V.shape[1]:
+                break
+            self.memory.forget()
+            V = AV = np.zeros((U.size, 0))
+            r = b - S_x[U] - D * x[U]  # (the true residual: S x is kept alongside)
+        residual = np.abs(r).max() / tol
         raise NewtonFailed(f"the coupled contact solve (conjugate gradients on {U.size} contact points) did not reach "
-                           f"its tolerance in {limit} iterations at t = {time:.6g} s (residual {residual:.2g}); try "
+                           f"its tolerance in {limit} iterations at t = {time:.6g} s (residual {residual:.2g} x the tolerance); try "
                            "contact_solver = 'condensed'", time=time)
+
+
+class KrylovMemory:
+    """The last search directions p and their products S p, per operator S: the systems of the active set share S
+    and change little from one iteration and step to the next, so the part of a new solution in the span of the
+    directions already paid for is found without back-substitutions, and the conjugate gradients run on the rest
+    (deflated CG, Saad, Yeung, Erhel and Guyomarc'h, SISC 21 (2000)). A direction counts for a system when it
+    vanishes off the system's unknown points (then (S p) restricted to them is the system's own product).
+
+    >>> import numpy as np
+    >>> memory = KrylovMemory(capacity=2)
+    >>> S = np.array([[2.0, 1.0], [1.0, 2.0]])
+    >>> for p in np.eye(2): memory.remember("S", p, S @ p)
+    >>> V, AV, SV = memory.basis("S", np.array([True, True]), np.zeros(2))
+    >>> np.round(V.T @ S @ V, 12).tolist()  # A-orthonormal
+    [[1.0, 0.0], [0.0, 1.0]]
+    """
+
+    def __init__(self, capacity: int = 200):
+        self.capacity = capacity
+        self.owner, self.P, self.SP = None, [], []
+
+    def remember(self, schur, p: np.ndarray, S_p: np.ndarray) -> None:
+        if schur is not self.owner:
+            self.owner, self.P, self.SP = schur, [], []
+        self.P.append(p)
+        self.SP.append(S_p)
+        if len(self.P) > self.capacity:
+            del self.P[0], self.SP[0]
+
+    def basis(self, schur, unknown: np.ndarray, D: np.ndarray):
+        """(V, A V, S V) for the system on the points ``unknown`` with A = S_UU + diag(D_U): V (on those points) spans
+        the remembered directions that vanish off them, A-orthonormal; S V at all points. Empty without any."""
+        U = np.nonzero(unknown)[0]
+        keep = [j for j, p in enumerate(self.P) if not np.any(p[~unknown])] if schur is self.owner else []
+        keep = keep[-3 * U.size:]  # (more than |U| directions on |U| points are dependent: the latest few)
+        if not keep:
+            return np.zeros((U.size, 0)), np.zeros((U.size, 0)), np.zeros((len(unknown), 0))
+        W = np.array([self.P[j][U] for j in keep]).T
+        SW = np.array([self.SP[j] for j in keep]).T
+        AW = SW[U] + D[U, None] * W
+        for _ in range(2):  # A-orthonormalised twice: once leaves errors of cond(G) eps, which the deflation amplifies
+            G = W.T @ AW
+            values, vectors = np.linalg.eigh(0.5 * (G + G.T))
+            use = values > 1e-10 * values.max()
+            E = vectors[:, use] / np.sqrt(values[use])
+            W, AW, SW = W @ E, AW @ E, SW @ E
+        return W, AW, SW
+
+    def forget(self) -> None:
+        self.owner, self.P, self.SP = None, [], []
