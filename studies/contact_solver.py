@@ -8,7 +8,7 @@ both pay the same), the setup time, back-substitutions (``linear_solves``), acti
 iterations (Model A: Newton iterations; its back-substitutions are not counted: -1), and the largest difference between the two solvers' contact displacements (relative). Beside them the
 cost of assembling and factoring K alone (NGSolve's sparse Cholesky, the yardstick of issue 22). ``--big`` adds the
 hemisphere at h_contact = 0.005 (47k dofs, 5186 contact vertices), coupled only (condensed: 783 s, measured before,
-``data/hertz/hertz3d_fine.csv``). Writes ``summary.csv`` and prints the table.
+``data/hertz/hertz3d_fine.csv``). Writes ``summary.csv`` and prints the table of docs/schemes.md.
 """
 from __future__ import annotations
 
@@ -65,6 +65,23 @@ def one(name, overrides, solver):
     return row, ds
 
 
+def table(rows) -> str:
+    """The markdown table of docs/schemes.md from the rows of one run."""
+    by = {}
+    for r in rows:
+        by.setdefault((r["case"], r["overrides"]), {})[r["solver"]] = r
+    lines = ["| case | dofs | contact points | steps | condensed [s] | coupled [s] | coupled: back-substitutions (CG) "
+             "| difference | factor of K alone [s] |", "|---|---|---|---|---|---|---|---|---|"]
+    for (case, overrides), d in by.items():
+        c, k = d.get("condensed"), d["coupled"]
+        backsubs = k["backsubs"] if int(k["backsubs"]) >= 0 else "—"
+        difference = f"{float(k['difference']):.1e}" if k.get("difference") not in (None, "") else "—"
+        lines.append(f"| `{case}` {overrides} | {k['ndof']} | {k['points']} | {k['steps']} | "
+                     f"{c['wall'] if c else 'not run'} | {k['wall']} | {backsubs} ({k['cg']}) | {difference} | "
+                     f"{k['factor_K']} |")
+    return "\n".join(lines)
+
+
 def main():
     p = argparse.ArgumentParser(description=__doc__.splitlines()[0])
     p.add_argument("--out", default="data/contact_solver")
@@ -96,6 +113,7 @@ def main():
         w = csv.DictWriter(f, fieldnames=keys)
         w.writeheader()
         w.writerows(rows)
+    print(table(rows))
     print(f"wrote {out / 'summary.csv'}")
 
 
