@@ -152,3 +152,20 @@ def test_spoiled_remembered_directions_are_dropped(monkeypatch):
     a, b = _pair("memory_slab", dict(h=0.1, k=0.05))
     assert dropped  # (the safeguard ran)
     assert float(np.abs(a.u_contact - b.u_contact).max()) <= 1e-8 * float(np.abs(a.u_contact).max())
+
+
+@pytest.mark.parametrize("name, overrides", [("memory_hertz3d", dict(h_contact=0.04)),
+                                             ("tp5", dict(scheme="bdf2", k=0.005, T=0.1))], ids=["Model B", "Model A"])
+def test_no_factor_at_all_with_solver_cg(name, overrides):
+    """solver = 'cg' (AMG-preconditioned CG, no factor: memory like the matrix) with the coupled contact solver, which
+    needs only products with K^-1; 'auto' resolves to coupled. Equal to the factored run to the CG tolerance."""
+    a = workbench.run(name, contact_solver="coupled", progress=False, **overrides)
+    b = workbench.run(name, solver="cg", progress=False, **overrides)
+    assert b.attrs["contact_solver_used"] == "coupled"
+    assert float(np.abs(a.u_contact - b.u_contact).max()) <= 1e-8 * float(np.abs(a.u_contact).max())
+
+
+def test_solver_cg_with_the_condensed_solver_is_refused():
+    with pytest.raises(ParameterError) as err:
+        workbench.run("memory_slab", solver="cg", contact_solver="condensed", progress=False)
+    assert "contact_solver = 'coupled'" in str(err.value) and "solver = 'cg'" in str(err.value)

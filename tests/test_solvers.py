@@ -65,8 +65,6 @@ def test_rigid_body_modes_are_exact():
     """The modes are in the kernel of the unconstrained stiffness (2D: 3, 3D: 6)."""
     import ngsolve as ngs
 
-    from workbench.physics import kelvin_voigt
-
     for name in ("slab", "block"):
         sc = workbench.scene(name, h=0.1, order=2)
         m = sc.model_of()
@@ -81,7 +79,8 @@ def test_rigid_body_modes_are_exact():
 def test_auto_takes_cg_for_a_large_3d_explicit_run_only(monkeypatch):
     """auto resolves to cg for the explicit scheme in 3D when the sparse factor would exceed FACTOR_BYTES; the run
     then agrees with the direct solver (u at the probes to 1e-9), records its iterations, and estimates k_crit with
-    LOBPCG (agreeing with Lanczos to 1e-6); the implicit schemes refuse cg by name."""
+    LOBPCG (agreeing with Lanczos to 1e-6); the implicit schemes with the condensed contact solver refuse cg by name
+    (with the coupled one they take it: tests/test_coupled_contact.py)."""
     kw = dict(order=2, h=0.1, T=0.01, k=0.002, c_nu=100.0)
     direct = workbench.run("block", progress=False, **kw)
     monkeypatch.setattr(solvers, "FACTOR_BYTES", 1.0)
@@ -93,7 +92,7 @@ def test_auto_takes_cg_for_a_large_3d_explicit_run_only(monkeypatch):
     assert abs(ds.attrs["k_crit"] / direct.attrs["k_crit"] - 1) < 1e-6
     assert ds.cg_iterations[0] == 0 and (ds.cg_iterations[1:] > 0).all()
     with pytest.raises(workbench.ParameterError, match="solver = 'cg'"):
-        workbench.scene("block", scheme="implicit", solver="cg")
+        workbench.scene("block", scheme="implicit", solver="cg", contact_solver="condensed")
     # asked for on the rod (one rigid mode; tp3's end moves: the lifted solve), it agrees with the band
     rods = [workbench.run("tp3", solver=s, T=0.5, progress=False) for s in ("cg", "banded")]
     assert rods[0].attrs["linear_solver"] == "cg"

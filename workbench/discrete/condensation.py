@@ -129,6 +129,8 @@ class SchurOperator:
             rhs[self.C] = self.sign * x
         else:
             rhs[:] = self.B.T @ x
+        if self.solver.warm_start:
+            out[:] = 0.0  # (the last product's solution is no guess for this one)
         self.solver.solve(rhs, out)
         self.applications += 1
         return self.sign * out[self.C] if self.B is None else self.B @ out

@@ -11,8 +11,8 @@ extrapolated from the last two steps there),
 to a relative residual of :data:`CG_TOL`: no factor, so memory grows like the matrix
 (the P2 block at 271k dofs, a whole explicit run: 2.1 GB peak and 37 s setup against 5.1 GB and 115 s with
 NGSolve's sparse factor; 7.9 s a step against 2.1 s; `studies/bench_3d_solver.py`).
-Only for solves with one constant matrix (the explicit scheme): the implicit schemes
-condense on the contact dofs, one solve per contact dof.
+For the explicit scheme, and for the implicit ones with the coupled contact solver (which needs products with
+K^-1 only); the condensed contact solver takes one solve per contact dof and wants a factor.
 ``auto`` takes ``banded`` when the ordered bandwidth is small against the size, and,
 for the explicit scheme in 3D, ``cg`` when the sparse factor would exceed
 :data:`FACTOR_BYTES` (:func:`choose`).

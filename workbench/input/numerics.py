@@ -30,7 +30,8 @@ class Registered(NamedTuple):
     cls: str
     #: Whether it takes error-controlled steps (``rtol > 0``): it estimates its local error.
     error_control: bool = True
-    #: Whether its systems may be solved iteratively (``solver = 'cg'``): one constant matrix, no condensation.
+    #: Whether its systems may be solved iteratively (``solver = 'cg'``): one constant matrix, no condensation (the
+    #: schemes with ``coupled`` may too, with their contact solved on the whole body; ``auto`` picks cg only here).
     iterative: bool = False
     #: Whether it runs on a body distributed over several MPI processes.
     distributed: bool = False
@@ -127,6 +128,8 @@ class Numerics:
         """
         if self.contact_solver != "auto":
             return self.contact_solver == "coupled"
+        if self.solver == "cg":
+            return True  # (an iterative solver has no factor to repeat the condensed solver's per-point solves with)
         return unknowns >= min(COUPLED_PER_STEP * max(1.0, self.T / self.k), COUPLED_FROM)
 
     @property

@@ -67,8 +67,9 @@ _TABLE: dict[str, Param] = {p.name: p for p in [
     _p("allow_unstable", False, "", "run the explicit scheme even when k exceeds its predicted stability limit",
        "flag"),
     _p("solver", "auto", "", "linear solver for the constant matrix: banded Cholesky (RCM order), NGSolve's "
-       "sparsecholesky or umfpack, or cg (AMG-preconditioned conjugate gradients, explicit scheme only); auto = banded "
-       "when the bandwidth is small, cg for the explicit scheme in 3D when a sparse factor would exceed 2 GB",
+       "sparsecholesky or umfpack, or cg (AMG-preconditioned conjugate gradients, no factor: the explicit scheme, and "
+       "the implicit ones with the coupled contact solver); auto = banded when the bandwidth is small, cg for the "
+       "explicit scheme in 3D when a sparse factor would exceed 2 GB",
        "choice", choices=("auto", "banded", "sparsecholesky", "umfpack", "cg")),
     _p("contact_solver", "auto", "", "how an implicit step's contact problem is solved: condensed (the dense contact "
        "stiffness, one solve per contact point: fast for a few hundred points) or coupled (on the whole body, "

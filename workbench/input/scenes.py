@@ -395,11 +395,15 @@ def _check_consistency(name, body, v, model="A"):
         raise ParameterError(f"order = {v['order']}: Model {model} constrains the contact nodes (K_h): order 1, or 2 on "
                              f"a 2D body (vertices and facet midpoints); allowed here: order "
                              f"{' | '.join(str(o) for o in range(1, highest + 1))}")
-    if v["solver"] == "cg" and not scheme.iterative:
+    coupled_cg = scheme.coupled and v["contact_solver"] != "condensed"  # (no per-dof solves to repeat)
+    if v["solver"] == "cg" and not (scheme.iterative or coupled_cg):
         iterative = " | ".join(repr(n) for n, e in SCHEMES.items() if e.iterative and e.model == model)
-        raise ParameterError(f"solver = 'cg' (iterative) applies to the scheme(s) {iterative} only; scheme = "
-                             f"{v['scheme']!r} condenses on the contact dofs, one solve per contact dof: use "
-                             f"solver = 'auto' (a direct factor)" + (f" or scheme = {iterative}" if iterative else ""))
+        coupled = " or contact_solver = 'coupled'" if scheme.coupled else ""
+        raise ParameterError(f"solver = 'cg' (iterative) applies to the scheme(s) {iterative or 'none'} and to the "
+                             f"coupled contact solver; scheme = {v['scheme']!r} with contact_solver = "
+                             f"{v['contact_solver']!r} condenses on the contact dofs, one solve per contact dof: use "
+                             f"solver = 'auto' (a direct factor){coupled}"
+                             + (f" or scheme = {iterative}" if iterative else ""))
     if v["contact_solver"] == "coupled" and not scheme.coupled:
         coupled = " | ".join(repr(n) for n, e in SCHEMES.items() if e.coupled)
         raise ParameterError(f"contact_solver = 'coupled' applies to the schemes that solve a contact problem each "

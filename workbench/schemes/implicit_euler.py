@@ -119,7 +119,7 @@ class ImplicitEuler(ErrorControlled, KelvinVoigtScheme):
             built_from = a0 if entry is None else entry
             M = d.viscous.mat.CreateMatrix()
             M.AsVector().data = built_from * d.viscous.mat.AsVector() + d.elastic.mat.AsVector()
-            solver = solvers.factor(M, d.fes.FreeDofs(), d.u.vec, d.scene["solver"])
+            solver = solvers.factor(M, d.fes.FreeDofs(), d.u.vec, d.scene["solver"], fes=d.fes)
             newton = None
             if self.op is not None and self.op.size and self.coupled:
                 newton = CoupledNewton(SchurOperator(solver, d.ndof, self.op.C), self.op)

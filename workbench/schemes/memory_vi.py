@@ -93,7 +93,8 @@ class MemoryVI(ErrorControlled, Scheme):
         """Records how a general kernel was approximated by exponentials (its terms and error bound)."""
         memory = self.d.model.memory
         fit = memory.fit if memory is not None else None
-        used = {"contact_solver_used": "coupled" if self.coupled is not None else "condensed"}
+        used = {"contact_solver_used": "coupled" if self.coupled is not None else "condensed",
+                "linear_solver": self.solver.name}
         return used if fit is None else used | {"kernel_terms": fit["terms"], "kernel_fit_error": fit["error"]}
 
     # -- the operator of a step -------------------------------------------------------------------------------
@@ -110,7 +111,7 @@ class MemoryVI(ErrorControlled, Scheme):
                 vec.data = d.elastic.mat.AsVector()
                 for wi, si, (K, _, _) in zip(weights, self.memory.scales, d.memory):
                     vec.data += (wi * si) * K.mat.AsVector()
-            solver = solvers.factor(M, d.fes.FreeDofs(), d.u.vec, d.numerics.solver)
+            solver = solvers.factor(M, d.fes.FreeDofs(), d.u.vec, d.numerics.solver, fes=d.fes)
             nodes = self.nodes
             schur = SchurOperator(solver, d.ndof, nodes.C, nodes.sign, matrix_diagonal(M), nodes.B) \
                 if self.coupled is not None else None
