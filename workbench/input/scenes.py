@@ -381,20 +381,8 @@ def _check_size(body, values) -> None:
                              f"{MAX_VERTICES:.0e} this workbench runs (a slip of a digit?); use a coarser mesh")
 
 
-def _check_consistency(name, body, v, model="A"):
-    """Checks that involve several parameters."""
-    allowed = schemes_of(model)
-    if v["scheme"] not in allowed:
-        raise ParameterError(f"scheme = {v['scheme']!r} does not apply to a Model {model} scene; "
-                             f"allowed: {' | '.join(repr(s) for s in allowed)}")
-    scheme = SCHEMES[v["scheme"]]
-    if "prony" in v:
-        _check_memory(body, v)
-    highest = MODELS[model].max_order(body.dim)
-    if v["order"] > highest:
-        raise ParameterError(f"order = {v['order']}: Model {model} constrains the contact nodes (K_h): order 1, or 2 on "
-                             f"a 2D body (vertices and facet midpoints); allowed here: order "
-                             f"{' | '.join(str(o) for o in range(1, highest + 1))}")
+def _check_solvers(v, scheme, model):
+    """The linear and contact solvers against what the scheme can do."""
     coupled_cg = scheme.coupled and v["contact_solver"] != "condensed"  # (no per-dof solves to repeat)
     if v["solver"] == "cg" and not (scheme.iterative or coupled_cg):
         iterative = " | ".join(repr(n) for n, e in SCHEMES.items() if e.iterative and e.model == model)
@@ -409,6 +397,23 @@ def _check_consistency(name, body, v, model="A"):
         raise ParameterError(f"contact_solver = 'coupled' applies to the schemes that solve a contact problem each "
                              f"step ({coupled}); scheme = {v['scheme']!r} takes its contact forces from the last step: "
                              "leave contact_solver = 'auto'")
+
+
+def _check_consistency(name, body, v, model="A"):
+    """Checks that involve several parameters."""
+    allowed = schemes_of(model)
+    if v["scheme"] not in allowed:
+        raise ParameterError(f"scheme = {v['scheme']!r} does not apply to a Model {model} scene; "
+                             f"allowed: {' | '.join(repr(s) for s in allowed)}")
+    scheme = SCHEMES[v["scheme"]]
+    if "prony" in v:
+        _check_memory(body, v)
+    highest = MODELS[model].max_order(body.dim)
+    if v["order"] > highest:
+        raise ParameterError(f"order = {v['order']}: Model {model} constrains the contact nodes (K_h): order 1, or 2 on "
+                             f"a 2D body (vertices and facet midpoints); allowed here: order "
+                             f"{' | '.join(str(o) for o in range(1, highest + 1))}")
+    _check_solvers(v, scheme, model)
     if v["k"] > v["T"]:
         raise ParameterError(f"k = {v['k']:g} is larger than T = {v['T']:g}; allowed: 0 < k <= T")
     if is_adaptive(v["rtol"]):
