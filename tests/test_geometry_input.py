@@ -208,3 +208,33 @@ def test_the_memory_preflight_counts_a_mesh_bodys_own_vertices(slab_msh):
                workbench.scene("memory_hertz3d", h_contact=0.04)):
         est = preflight.estimate(sc.body, 1)
         assert est.ndof == discretisation.build(sc.with_(order=1)).ndof
+
+
+def test_the_hertz_mesh_cache_gives_the_mesh_it_would_make(tmp_path, monkeypatch):
+    """A Hertz body's mesh is made once and kept in the cache folder: the cached one is the made one bit for bit
+    (coordinates, elements, boundary names), and a damaged cache file is made again."""
+    import pickle
+
+    from workbench.input import geometry, meshes
+
+    monkeypatch.setenv("WORKBENCH_CACHE", str(tmp_path))
+    args = ("hemisphere", 1.0, 0.25, 0.04, 0.3)
+    made = geometry._make_indenter_mesh(*args)
+    geometry._indenter_mesh.cache_clear()
+    first = geometry._indenter_mesh(*args)  # made and stored
+    geometry._indenter_mesh.cache_clear()
+    stored = list((tmp_path / "meshes").glob("netgen-*.pickle"))
+    assert len(stored) == 1
+    again = geometry._indenter_mesh(*args)  # loaded
+    for m in (first, again):
+        assert np.array_equal(np.array(m.Coordinates()), np.array(made.Coordinates()))
+        assert [tuple(e.vertices) for e in m.Elements3D()] == [tuple(e.vertices) for e in made.Elements3D()]
+        assert [m.GetBCName(i) for i in range(m.GetNFaceDescriptors())] == \
+            [made.GetBCName(i) for i in range(made.GetNFaceDescriptors())]
+    stored[0].write_bytes(b"not a pickle")
+    geometry._indenter_mesh.cache_clear()
+    repaired = geometry._indenter_mesh(*args)
+    assert np.array_equal(np.array(repaired.Coordinates()), np.array(made.Coordinates()))
+    with open(stored[0], "rb") as f:
+        assert np.array_equal(np.array(pickle.load(f).Coordinates()), np.array(made.Coordinates()))
+    assert meshes.RECIPES >= 1

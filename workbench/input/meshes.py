@@ -45,6 +45,51 @@ def cache_folder() -> Path:
     return Path(root) / "meshes"
 
 
+#: Bump when a cached mesh's recipe changes (the key holds the recipe's arguments and netgen's version, not its code).
+RECIPES = 1
+
+
+def cached_netgen(key: str, make):
+    """The netgen mesh ``make()`` returns, made once per ``key`` and kept in the cache folder.
+
+    Pickled, since netgen's own .vol text rounds the coordinates (a loaded mesh gave other results in the last digits);
+    a file that cannot be read is made again, and a folder that cannot be written only costs the time to make it.
+    The file is the user's own, written by this function: loading it is no more trusting than running the code.
+
+    >>> import netgen.meshing as nm
+    >>> made = []
+    >>> def make():
+    ...     made.append(1)
+    ...     m = nm.Mesh(dim=2)
+    ...     m.AddPoints(np.array([[0.0, 0.0, 0.0], [1.0, 0.0, 0.0], [0.0, 1.0 / 3.0, 0.0]]))
+    ...     return m
+    >>> a, b = cached_netgen("doctest triangle", make), cached_netgen("doctest triangle", make)
+    >>> np.array_equal(a.Coordinates(), b.Coordinates()), len(made) <= 1
+    (True, True)
+    """
+    import pickle
+
+    import netgen
+
+    tag = hashlib.sha256(f"{key}|netgen {netgen.__version__}|recipes {RECIPES}".encode()).hexdigest()[:24]
+    path = cache_folder() / f"netgen-{tag}.pickle"
+    try:
+        with open(path, "rb") as f:
+            return pickle.load(f)
+    except Exception:  # (absent, truncated, from another netgen: any failure to read means make it again)
+        pass
+    mesh = make()
+    try:
+        path.parent.mkdir(parents=True, exist_ok=True)
+        tmp = path.with_name(f".{path.name}.{os.getpid()}")
+        with open(tmp, "wb") as f:
+            pickle.dump(mesh, f)
+        os.replace(tmp, path)
+    except OSError:
+        pass
+    return mesh
+
+
 def _writable(folder: Path) -> Path:
     """``folder``, made; or, when it cannot be written, a folder in the temporary directory (with a warning)."""
     import tempfile
