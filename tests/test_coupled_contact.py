@@ -169,3 +169,17 @@ def test_solver_cg_with_the_condensed_solver_is_refused():
     with pytest.raises(ParameterError) as err:
         workbench.run("memory_slab", solver="cg", contact_solver="condensed", progress=False)
     assert "contact_solver = 'coupled'" in str(err.value) and "solver = 'cg'" in str(err.value)
+
+
+def test_a_continued_coupled_run_equals_the_straight_one_to_the_solver_tolerance(tmp_path):
+    """Restart: the remembered Krylov directions are a cache an archive does not keep (up to 200 point vectors), so
+    the continued run's conjugate gradients take another path to the same tolerance: equal to 1e-9, not bitwise."""
+    values = dict(h=0.125, k=0.05, contact_solver="coupled", solver="banded")
+    half = workbench.run("memory_block", T=0.5, progress=False, **values)
+    path = workbench.write(half, tmp_path / "half.nc")
+    continued = workbench.run("memory_block", restart=path, T=1.0, progress=False, **values)
+    straight = workbench.run("memory_block", T=1.0, progress=False, **values)
+    np.testing.assert_array_equal(continued.time.values, straight.time.values)
+    np.testing.assert_array_equal(continued.contact_state.values, straight.contact_state.values)
+    scale = float(np.abs(straight.u_contact).max())
+    assert float(np.abs(continued.u_contact - straight.u_contact).max()) <= 1e-9 * scale

@@ -230,3 +230,33 @@ def test_the_contact_zone_follows_the_parameter():
         workbench.run("memory_hertz3d", h_contact=0.04, contact_zone=0.2, progress=False)
     with pytest.raises(workbench.ParameterError, match="contact_zone"):
         workbench.scene("memory_hertz3d", contact_zone=0.95)
+
+
+def test_recovered_pressure_against_hertz_3d():
+    """The patch-recovered pressure (contact_pressure_recovered) of the hemisphere against Hertz's: the same resultant
+    as the nodal forces, and smoother and closer than the lumped one on the unstructured surface mesh (measured at
+    h_contact = 0.02: spread of p / p_Hertz inside 0.8 a 6.2 % -> 2.3 %, peak +10.8 % -> +1.6 %, L2 10.2 % -> 5.8 %)."""
+    ds = workbench.run("memory_hertz3d", h_contact=0.02, progress=False)
+    lumped, recovered = (hertz.profile(ds, variable=v) for v in ("contact_pressure", "contact_pressure_recovered"))
+    assert abs(recovered["force"] - lumped["force"]) < 1e-12 and abs(lumped["force"] - 1) < 1e-9
+    p0 = hertz.sphere(lumped["load"], 1.0, 1000.0, 0.3)[1](0.0)
+
+    def spread_and_peak(r):
+        inner = (r["x"] > 0) & (r["x"] < 0.8 * r["a"])
+        return float(np.std(r["p"][inner] / r["p_hertz"][inner])), float(np.max(r["p"][r["x"] > 0]) / p0 - 1)
+
+    (s_l, peak_l), (s_r, peak_r) = spread_and_peak(lumped), spread_and_peak(recovered)
+    assert s_r < 0.5 * s_l and abs(peak_r) < 0.03 < abs(peak_l)
+    assert recovered["l2"] < 0.7 * lumped["l2"]
+    outside = ds.contact_pressure.isel(time=-1).values <= 0  # (no pressure leaks out of the contact zone)
+    assert np.all(ds.contact_pressure_recovered.isel(time=-1).values[outside] <= 0)
+
+
+def test_recovered_pressure_keeps_a_uniform_pressure():
+    """A flat body pressed uniformly: every patch average of a constant is that constant."""
+    d = discretisation.build(workbench.scene("memory_hertz3d", h_contact=0.04))
+    w = d.node_weights
+    p = np.full(len(w), 7.0)
+    np.testing.assert_allclose(d.recovered_pressure(p, w), 7.0, rtol=1e-13)
+    p[0] = np.nan  # a clamped vertex stays unknown
+    assert np.isnan(d.recovered_pressure(p, w)[0])

@@ -71,6 +71,8 @@ VARIABLES = {
     "complementarity": ("m", "max over contact nodes of |s - prox(s + rho lam / w)|"),
     "contact_pressure": ("Pa", "contact pressure -sigma_nu at the contact vertices (lumped)"),
     "contact_state": ("1", "contact state: -1 clamped, 0 separated, 1 stuck, 2 compliant, 3 rigid"),
+    "contact_pressure_recovered": ("Pa", "contact pressure averaged over each vertex's patch of the contact side by "
+                                   "the nodal forces (sum F_j / sum w_j): smooth on unstructured meshes"),
     "component": ("1", "displacement component"),
     "probe": ("1", "probe index"),
     "node": ("1", "contact-boundary vertex index"),

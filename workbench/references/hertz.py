@@ -57,8 +57,9 @@ def lee_radok(t: float, rate: float, R: float, E: float, nu: float, tau: float, 
     return (0.75 * R * creep) ** (1.0 / 3.0)
 
 
-def profile(ds, time=None):
-    """The contact pressure of a ``hertz`` run at ``time`` (default: its last) against Hertz's for the load then.
+def profile(ds, time=None, variable: str = "contact_pressure"):
+    """The contact pressure of a ``hertz`` run at ``time`` (default: its last) against Hertz's for the load then
+    (``variable``: the lumped nodal pressure, or ``contact_pressure_recovered``, its patch average).
 
     Returns a dict: ``a`` (Hertz), ``a_last`` / ``a_next`` (the farthest contact point with a positive
     pressure, the nearest without; the points are the vertices, and on P2 Model B's facet midpoints too), ``a_fit`` (the half-width of the Hertz profile fitted to the pressure:
@@ -82,9 +83,9 @@ def profile(ds, time=None):
         r = np.abs(ds.node_x.values)
         a, p_of = cylinder(P, R, E, nu)
         share = P / 2.0  # the half x >= 0
-    p = ds.contact_pressure.values[i]
+    p = ds[variable].values[i]
     w = ds.node_weight.values
-    if "contact_pressure_midpoint" in ds:  # Model B on P2: the facet midpoints are contact points too
+    if "contact_pressure_midpoint" in ds and variable == "contact_pressure":  # Model B on P2: the facet midpoints are contact points too
         rm = np.abs(ds.midpoint_x.values) if not three else np.hypot(ds.midpoint_x.values, ds.midpoint_y.values)
         r = np.concatenate([r, rm])
         p = np.concatenate([p, ds.contact_pressure_midpoint.values[i]])

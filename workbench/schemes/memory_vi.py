@@ -288,7 +288,10 @@ class MemoryObserver(Observer):
             pressure[s.pinned] = reaction / nodes.vertex_weights[s.pinned]
             layer = nodes.layer
             state[s.pinned] = unilateral.STUCK if layer.g > 0 or layer.F > 0 else unilateral.RIGID
-        return {"contact_pressure": pressure, "contact_state": state}
+        out = {"contact_pressure": pressure, "contact_state": state}
+        if nodes.B is None:  # (P2: the facet midpoints carry most of the force; their own pressures are recorded)
+            out["contact_pressure_recovered"] = d.recovered_pressure(pressure, nodes.vertex_weights)
+        return out
 
     def node_weights(self) -> np.ndarray:
         """Each contact vertex's share of the side as the pressures use it (P2: Simpson's, 1/6 of each facet)."""
