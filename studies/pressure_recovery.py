@@ -4,7 +4,7 @@
 
 Runs ``memory_hertz`` (2D, Signorini) and ``memory_hertz3d`` (the hemisphere) at three contact-zone sizes and
 reports, for ``contact_pressure`` (F_i / w_i) and ``contact_pressure_recovered`` (the patch average,
-:meth:`workbench.discrete.discretisation.Discretisation.recovered_pressure`): the relative L2 error within 2 a (by
+:class:`workbench.discrete.pressure.Recovery`): the relative L2 error within 2 a (by
 the vertices' weights), the peak's error against p0 (the apex left out: its value is the support's reaction), the
 spread of p / p_Hertz inside 0.8 a (the scatter of an unstructured surface mesh) and the resultant over the load's
 share. Writes ``pressure_recovery.csv`` and prints the table of docs/models.md.

@@ -257,6 +257,6 @@ def test_recovered_pressure_keeps_a_uniform_pressure():
     d = discretisation.build(workbench.scene("memory_hertz3d", h_contact=0.04))
     w = d.node_weights
     p = np.full(len(w), 7.0)
-    np.testing.assert_allclose(d.recovered_pressure(p, w), 7.0, rtol=1e-13)
+    np.testing.assert_allclose(d.pressure_recovery(p, w), 7.0, rtol=1e-13)
     p[0] = np.nan  # a clamped vertex stays unknown
-    assert np.isnan(d.recovered_pressure(p, w)[0])
+    assert np.isnan(d.pressure_recovery(p, w)[0])

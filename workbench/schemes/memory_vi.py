@@ -290,7 +290,7 @@ class MemoryObserver(Observer):
             state[s.pinned] = unilateral.STUCK if layer.g > 0 or layer.F > 0 else unilateral.RIGID
         out = {"contact_pressure": pressure, "contact_state": state}
         if nodes.B is None:  # (P2: the facet midpoints carry most of the force; their own pressures are recorded)
-            out["contact_pressure_recovered"] = d.recovered_pressure(pressure, nodes.vertex_weights)
+            out["contact_pressure_recovered"] = d.pressure_recovery(pressure, nodes.vertex_weights)
         return out
 
     def node_weights(self) -> np.ndarray:

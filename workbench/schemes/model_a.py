@@ -105,7 +105,7 @@ class KelvinVoigtObserver(Observer):
         pinned = d.pinned_nodes
         if pinned.size and t is not None:
             pressure[pinned] = self._reaction(t, pinned)
-        return {"contact_pressure": pressure, "contact_pressure_recovered": d.recovered_pressure(pressure, d.node_weights)}
+        return {"contact_pressure": pressure, "contact_pressure_recovered": d.pressure_recovery(pressure, d.node_weights)}
 
     def _reaction(self, t: float, pinned: np.ndarray) -> np.ndarray:
         """The pressure at held contact vertices: the support's reaction (K_A v + K_G u - f at their normal dofs)
