@@ -137,9 +137,8 @@ class MemoryVI(ErrorControlled, Scheme):
         entry = next(e for e in self._operators.values() if e[1] is self.solver)
         if entry[2] is None:
             entry[2] = self._condense(self.solver)
-            entry[3] = 100.0 / np.diag(entry[2])
         self.S_inv = entry[2]
-        return entry[2], entry[3]
+        return entry[2], 100.0 / np.diag(entry[2])  # (the condensed solver's own scale; the coupled one keeps its)
 
     # -- steps ----------------------------------------------------------------------------------------------------
     def start(self, t0: float) -> None:
@@ -183,7 +182,8 @@ class MemoryVI(ErrorControlled, Scheme):
                 before = self.schur.applications
                 s, lam, iterations = self.coupled.solve(self.schur, self.rho, nodes.distance(self.z), time,
                                                         self._condensed_fallback)
-                solves += self.schur.applications - before - iterations  # (all back-substitutions in the end)
+                # (linear_solves below adds the iterations: each back-substitution of the solve counted once)
+                solves += self.schur.applications - before - iterations
             else:
                 s, lam, iterations = nodes.solve(self.S_inv, self.rho, nodes.distance(self.z), time)
             if nodes.g0 is not None:  # (the layer's law acts on the distance to the foundation)
