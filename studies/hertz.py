@@ -6,7 +6,8 @@ Runs the elastic contact in the Signorini limit (Model B, ``memory_hertz`` / ``m
 normal compliance (Model A, ``hertz``, c_nu = 1e7, tau = 1e-3 s) at three contact-zone sizes h_contact, and the
 viscoelastic ramp (Model A, tau = 0.2 s) against Lee and Radok. Writes ``hertz.csv`` (one row per run), the
 pressure profiles (``hertz_profiles.png``) and a(t) (``lee_radok.png``), and prints the table and the observed
-orders of the pressure's L2 error in h_contact.
+orders of the pressure's L2 error in h_contact; the profiles show the lumped pressure (dots) and the recovered one
+(crosses, ``contact_pressure_recovered``).
 
     python studies/hertz.py --fine3d HC [HC ...] [--contact-zone Z] [--threads N]
 
@@ -75,14 +76,16 @@ def main():
             ds = workbench.run(scene, h_contact=hc, progress=False, **extra)
             wall = time.perf_counter() - t0
             r = hertz.profile(ds)
+            recovered = hertz.profile(ds, variable="contact_pressure_recovered")
             errors.append(r["l2"])
-            profiles[scene, hc] = r
+            profiles[scene, hc] = r, recovered
             rows.append(dict(scene=scene, case=label, h_contact=hc, ndof=ds.attrs["ndof"], contact_nodes=ds.sizes["node"],
                              wall_time=round(wall, 2), setup_time=round(float(ds.attrs["setup_time"]), 2),
-                             a=r["a"], a_last=r["a_last"], a_next=r["a_next"], l2=r["l2"], force=r["force"]))
+                             a=r["a"], a_last=r["a_last"], a_next=r["a_next"], l2=r["l2"], force=r["force"],
+                             l2_recovered=recovered["l2"]))
             print(f"{label:26s} h_contact {hc:<8g} ndof {rows[-1]['ndof']:6d}  {wall:6.2f} s  a {r['a']:.4f}  "
-                  f"last in contact {r['a_last']:.4f}  next {r['a_next']:.4f}  L2 {100 * r['l2']:5.2f} %  "
-                  f"force/load {r['force']:.6f}")
+                  f"last in contact {r['a_last']:.4f}  next {r['a_next']:.4f}  L2 {100 * r['l2']:5.2f} % "
+                  f"(recovered {100 * recovered['l2']:5.2f} %)  force/load {r['force']:.6f}")
         order = np.polyfit(np.log(levels), np.log(errors), 1)[0]
         print(f"{label:26s} observed order of the L2 error in h_contact: {order:.2f}")
     with open(out / "hertz.csv", "w", newline="") as f:
@@ -119,14 +122,18 @@ def plot(profiles, lee, out):
 
     fig, axes = plt.subplots(1, 3, figsize=(14, 3.8))
     for ax, (scene, label, _, levels) in zip(axes, CASES):
-        r0 = profiles[scene, levels[0]]
+        r0 = profiles[scene, levels[0]][0]
         x = np.linspace(0, 1.5 * r0["a"], 300)
         ref = hertz.cylinder if "3d" not in scene else hertz.sphere
         ax.plot(x, ref(10.0, 1.0, 1000.0, 0.3)[1](x), "k", lw=2, label="Hertz")
         for hc in levels:
-            r = profiles[scene, hc]
+            r, recovered = profiles[scene, hc]
             near = r["x"] < 1.5 * r["a"]
-            ax.plot(r["x"][near], r["p"][near], ".", ms=3, label=f"h_contact = {hc:g} ({100 * r['l2']:.1f} %)")
+            dots = ax.plot(r["x"][near], r["p"][near], ".", ms=3,
+                           label=f"h_contact = {hc:g}: lumped ({100 * r['l2']:.1f} %)")[0]
+            near = recovered["x"] < 1.5 * recovered["a"]
+            ax.plot(recovered["x"][near], recovered["p"][near], "+", ms=4, color=dots.get_color(), alpha=0.6,
+                    label=f"recovered ({100 * recovered['l2']:.1f} %)")
         ax.set_title(label)
         ax.set_xlabel("distance from the apex [m]")
         ax.set_ylabel("pressure [Pa]")
