@@ -28,6 +28,7 @@ import ngsolve as ngs
 import numpy as np
 import scipy.sparse as sp
 
+from ..input.geometry import of_run
 from ..physics import kelvin_voigt
 from .discretisation import bonding_space
 from .fields import mesh_cells
@@ -104,10 +105,11 @@ class MeshInfo:
         return np.abs(np.linalg.det(T)) * fact if self.dim > 1 else np.abs(T[:, 0, 0])
 
 
-def mesh_info(scene) -> MeshInfo:
-    """The (cached) MeshInfo of a scene's mesh: keyed by everything that determines it (geometry, cells, order)."""
-    body = scene.body
-    if not body.extent_names or body.curved:  # (no box: the body itself says what its mesh is)
+def mesh_info(scene, ds=None) -> MeshInfo:
+    """The (cached) MeshInfo of a scene's mesh: keyed by everything that determines it (geometry, cells, order); with
+    ``ds``, of the mesh that run was computed on (an adapted one, :func:`workbench.input.geometry.of_run`)."""
+    body = scene.body if ds is None else of_run(scene.body, ds)
+    if not body.extent_names or body.curved or body is not scene.body:  # (the body itself says what its mesh is)
         return _body_info(body, scene["order"])
     return _mesh_info(body.kind, body.extent, body.cells(), scene["order"])
 

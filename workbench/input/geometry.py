@@ -640,5 +640,87 @@ def _quarter_ball_shape(R, h_contact, contact_zone):
     return shape
 
 
+class _OnMesh:
+    """A body on a mesh given to it (by the adaptive loop: its own mesh, refined), in place of the one it makes
+    (:func:`on_mesh`); everything else is the body's."""
+
+    adapted_mesh = None  # (the netgen mesh)
+    base_key = ()
+    body_class = Geometry
+
+    def mesh(self):
+        import ngsolve as ngs
+
+        return ngs.Mesh(self.adapted_mesh.Copy())
+
+    def _netgen(self):  # (a Hertz body measures its loaded side on it)
+        return self.adapted_mesh
+
+    def n_cells(self):
+        m = self.adapted_mesh
+        return len(m.Elements2D() if self.dim == 2 else m.Elements3D())
+
+    def cells(self):
+        return (self.n_cells(),)
+
+    def vertex_count(self):
+        return len(self.adapted_mesh.Points())
+
+    def estimated_vertices(self):
+        return float(self.vertex_count())
+
+    def band_cells(self):
+        return max(1, round(self.vertex_count() ** (1.0 / self.dim)))
+
+    def nested_in(self, finer):
+        return False
+
+    def key(self):
+        """The body's own key and the digest of the mesh's points (caches must not mix a body's meshes)."""
+        import hashlib
+
+        import numpy as np
+
+        points = np.ascontiguousarray(self.adapted_mesh.Coordinates(), dtype=float)
+        return self.base_key + ("on mesh", self.n_cells(), hashlib.sha256(points.tobytes()).hexdigest()[:16])
+
+
+_ON_MESH: dict = {}
+
+
+def on_mesh(body: Geometry, ngmesh) -> Geometry:
+    """The body ``body`` on the netgen mesh ``ngmesh`` (its own mesh refined: the boundaries keep their names).
+
+    Examples
+    --------
+    >>> g = Slab(width=1.0, height=0.1, h=0.05)
+    >>> m = g.mesh()
+    >>> m.Refine()
+    >>> fine = on_mesh(g, m.ngmesh)
+    >>> fine.mesh().ne, fine.cells(), fine.kind, fine.key() != g.key()
+    (320, (320,), 'slab', True)
+    """
+    import copy
+
+    if body.dim < 2:
+        raise ParameterError(f"a {body.kind} cannot be refined adaptively: netgen refines meshes in 2D and 3D only")
+    base = body.body_class if isinstance(body, _OnMesh) else type(body)
+    cls = _ON_MESH.setdefault(base, type(f"{base.__name__}OnMesh", (_OnMesh, base), {"body_class": base}))
+    out = copy.copy(body)
+    out.base_key = body.base_key if isinstance(body, _OnMesh) else body.key()
+    out.__class__, out.adapted_mesh = cls, ngmesh
+    return out
+
+
+def of_run(body: Geometry, ds) -> Geometry:
+    """The body a run was computed on: ``body`` (the scene's), on the run's adapted mesh where the run refined it
+    (``space_tol > 0``; the archive's ``adapted_mesh``)."""
+    if "adapted_mesh" not in ds:
+        return body
+    from .meshes import from_text
+
+    return on_mesh(body, from_text(str(ds.adapted_mesh.values)))
+
+
 #: The built-in geometries by name.
 GEOMETRIES = {g.kind: g for g in (Rod, Slab, Block, MeshBody2D, MeshBody3D, HalfDisc, Hemisphere)}

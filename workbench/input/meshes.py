@@ -309,3 +309,34 @@ def write_gmsh(mesh, path) -> Path:
     path = Path(path)
     meshio.write(str(path), out, file_format="gmsh22", binary=False)
     return path
+
+
+def to_text(ngmesh) -> str:
+    """A netgen mesh as the text of its .vol file (what an archive keeps of an adapted mesh)."""
+    import tempfile
+
+    with tempfile.TemporaryDirectory() as folder:
+        path = Path(folder) / "mesh.vol"
+        ngmesh.Save(str(path))
+        return path.read_text()
+
+
+def from_text(text: str):
+    """The netgen mesh of :func:`to_text`'s text (points, elements and boundary names in the same order).
+
+    >>> import netgen.geom2d as g2
+    >>> m = g2.unit_square.GenerateMesh(maxh=0.5)
+    >>> back = from_text(to_text(m))
+    >>> len(back.Points()) == len(m.Points()), len(back.Elements2D()) == len(m.Elements2D())
+    (True, True)
+    """
+    import tempfile
+
+    import netgen.meshing as nm
+
+    with tempfile.TemporaryDirectory() as folder:
+        path = Path(folder) / "mesh.vol"
+        path.write_text(text)
+        out = nm.Mesh()
+        out.Load(str(path))
+        return out

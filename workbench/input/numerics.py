@@ -55,6 +55,8 @@ SPACE = ("h", "order")
 TIME = ("k", "scheme", "solver", "contact_solver")
 #: Error-controlled steps (``rtol > 0``): the tolerances and the bounds of the step.
 CONTROL = ("rtol", "atol", "k_min", "k_max")
+#: Adaptive refinement in space (``space_tol > 0``): the tolerance of the estimate and the bound of the mesh.
+ADAPT = ("space_tol", "max_dofs")
 #: The explicit scheme's stability override.
 EXPLICIT = ("allow_unstable",)
 #: Model B: the rule of the memory integral and the approximation of a general kernel.
@@ -64,9 +66,9 @@ MESH = ("nx", "ny", "nz", "h_contact")
 
 #: Every numerical option: two runs that differ only in these model the same problem (a study compares them with
 #: one reference; any other difference is physics).
-DISCRETISATION = frozenset(SPACE + TIME + CONTROL + EXPLICIT + MEMORY + MESH)
+DISCRETISATION = frozenset(SPACE + TIME + CONTROL + ADAPT + EXPLICIT + MEMORY + MESH)
 #: The options along which a study fits an observed order (the finest value is the smallest).
-REFINEMENT = ("h", "k", "rtol", "h_contact")
+REFINEMENT = ("h", "k", "rtol", "h_contact", "space_tol")
 #: The axes every study has (length 1 when not swept), and the command line's named options besides T.
 AXES = ("h", "k", "order", "scheme")
 
@@ -112,6 +114,8 @@ class Numerics:
     k_max: float = 0.0
     allow_unstable: bool = False
     memory_rule: str = "rectangle"
+    space_tol: float = 0.0
+    max_dofs: int = 200000
     threads: int | None = None
 
     @property

@@ -64,6 +64,11 @@ _TABLE: dict[str, Param] = {p.name: p for p in [
     _p("atol", 1e-9, "m", "absolute tolerance of error-controlled steps (the displacement's)", **_POS),
     _p("k_min", 1e-9, "s", "smallest step error control may take (below: the run stops)", **_POS),
     _p("k_max", 0.0, "s", "largest step error control may take (0: T)", lower=0.0),
+    _p("space_tol", 0.0, "1", "relative tolerance of the a posteriori estimate of the error in space (energy norm): "
+       "the mesh is refined where the estimate is large and the run repeated until the estimate meets it, or "
+       "max_dofs; 0: the mesh as given", lower=0.0, upper=0.5),
+    _p("max_dofs", 200000, "1", "the most displacement dofs adaptive refinement (space_tol > 0) may reach",
+       "int", lower=100),
     _p("allow_unstable", False, "", "run the explicit scheme even when k exceeds its predicted stability limit",
        "flag"),
     _p("solver", "auto", "", "linear solver for the constant matrix: banded Cholesky (RCM order), NGSolve's "

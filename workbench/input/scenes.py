@@ -31,7 +31,7 @@ from ..errors import ParameterError
 from ..values import Param, closest_name, to_plain
 from .geometry import GEOMETRIES
 from .models import MODELS
-from .numerics import CONTROL, EXPLICIT, MEMORY, SCHEMES, SPACE, TIME, is_adaptive, schemes_of
+from .numerics import ADAPT, CONTROL, EXPLICIT, MEMORY, SCHEMES, SPACE, TIME, is_adaptive, schemes_of
 from .parameters import LAW_PARAMETERS, PARAMETERS
 
 try:  # Python >= 3.11
@@ -41,7 +41,7 @@ except ModuleNotFoundError:  # pragma: no cover
 
 _CONTACT = ("contact", "adhesion", "c_nu", "m_nu", "gap", "gamma_nu", "eps_a", "L", "beta0",
             "bonding_truncation") + LAW_PARAMETERS
-_TIME_B = ("T",) + SPACE + TIME + CONTROL  # Model B's numerics (and its memory's, _MEMORY)
+_TIME_B = ("T",) + SPACE + TIME + CONTROL + ADAPT  # Model B's numerics (and its memory's, _MEMORY)
 _TIME = _TIME_B + EXPLICIT
 _OUTPUT = ("probes", "snapshots", "checkpoint_every")
 _KV = ("E", "nu", "a1", "a2", "elastic_tensor", "viscous_tensor")
@@ -399,6 +399,17 @@ def _check_solvers(v, scheme, model):
                              "leave contact_solver = 'auto'")
 
 
+def _check_adaptive(body, v) -> None:
+    """space_tol > 0: a body netgen can refine, and a run that need not be continued."""
+    if body.dim < 2:
+        raise ParameterError(f"space_tol = {v['space_tol']:g}: a {body.kind}'s mesh cannot be refined adaptively "
+                             "(netgen refines 2D and 3D meshes); refine it by h, or leave space_tol = 0")
+    if v["checkpoint_every"]:
+        raise ParameterError(f"checkpoint_every = {v['checkpoint_every']} with space_tol = {v['space_tol']:g}: an "
+                             "adapted run is repeated on each mesh and cannot be continued from a checkpoint; leave "
+                             "checkpoint_every = 0")
+
+
 def _check_consistency(name, body, v, model="A"):
     """Checks that involve several parameters."""
     allowed = schemes_of(model)
@@ -426,6 +437,8 @@ def _check_consistency(name, body, v, model="A"):
         if not v["k_min"] <= v["k"] <= k_max:
             raise ParameterError(f"k = {v['k']:g} (the first step) must lie in [k_min, k_max] = [{v['k_min']:g}, "
                                  f"{k_max:g}]")
+    if v.get("space_tol", 0.0) > 0:
+        _check_adaptive(body, v)
     steps = v["T"] / v["k"]
     if steps > MAX_STEPS:
         raise ParameterError(f"k = {v['k']:g} and T = {v['T']:g} make {steps:.3g} time steps; at most {MAX_STEPS:.0e} "

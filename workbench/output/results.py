@@ -59,6 +59,8 @@ VARIABLES = {
     "cg_iterations": ("1", "conjugate gradient iterations of the time step's solve (solver = 'cg')"),
     "step_size": ("s", "accepted time step ending at this time (error-controlled steps)"),
     "error_estimate": ("1", "scaled local error estimate of the step (<= 1: within rtol, atol)"),
+    "space_error_estimate": ("1", "a posteriori estimate of the error in space at the time, energy norm, relative to "
+                             "the largest norm of u so far (space_tol > 0)"),
     "coupling_passes": ("1", "passes of the (u, beta) coupling iteration in the time step"),
     "iterations": ("1", "active-set iterations in the time step"),
     "linear_iterations": ("1", "conjugate gradient iterations on the active contact points in the time step "

@@ -130,6 +130,8 @@ def check(scene, model, numerics) -> None:
     elif numerics.order > 2:
         why = (f"order = {numerics.order}: on several processes the displacement is P1 or P2 (the edge dofs of higher "
                "orders depend on the edges' orientation on each rank)")
+    elif numerics.space_tol > 0:
+        why = f"space_tol = {numerics.space_tol:g}: adaptive refinement runs on one process"
     if why:
         raise ParameterError(f"{scene.name} on {w.size} MPI processes: {why}; run it with one process")
 

@@ -10,6 +10,7 @@ Examples
 from __future__ import annotations
 
 import contextlib
+import functools
 import inspect
 import os
 import warnings
@@ -25,7 +26,7 @@ from ..output import results
 from ..schemes import scheme_class
 from ..schemes.stepping import AdaptiveSteps, FixedSteps, march, time_grid
 from ..values import closest_name
-from . import preflight
+from . import adapt, preflight
 from . import restart as restarts
 from .threads import blas_single_threaded, task_manager
 
@@ -94,9 +95,15 @@ def run(scene=None, *, restart=None, checkpoint=None, progress=None, record_time
     preflight.resources(sc, model, len(grid) - 1, processes=world.size)
     call = _call(scene, dict(restart=restart, checkpoint=checkpoint), overrides,
                  dict(record_times=record_times, times=times, limit=limit, threads=threads))
-    job = _Run(sc, model, numerics, world, call, resume=resume, checkpoint=checkpoint, progress=progress)
-    with blas_single_threaded(), _quiet_unless_root(world):
-        return job.execute(grid, sync, record_times, limit)
+    job = functools.partial(_Run, sc, numerics=numerics, world=world, call=call, resume=resume, checkpoint=checkpoint,
+                            progress=progress)
+    with blas_single_threaded(), _quiet_unless_root(world):  # (space_tol > 0: repeated on adapted meshes)
+        return (adapt.run if numerics.space_tol > 0 else _once)(job, model, numerics, (grid, sync, record_times, limit))
+
+
+def _once(job, model, numerics, execute_args):
+    """The run of ``model`` (on the mesh as given)."""
+    return job(model).execute(*execute_args)
 
 
 def _check_checkpoint(sc, checkpoint) -> None:
@@ -258,6 +265,8 @@ class _Run:
         self.sc, self.model, self.numerics, self.world, self.call = sc, model, numerics, world, call
         self.resume, self.checkpoint, self.progress = resume, checkpoint, progress
         self.failed_checkpoint = None
+        self.estimator = self.indicators = None  # (space_tol > 0: the estimate in space, the largest per element)
+        self.space_estimate, self.largest_norm = 0.0, 0.0
 
     def execute(self, grid, sync, record_times, limit):
         """Set up, step from 0 (or the archive's time) to T, and return the Dataset (None on ranks other than 0);
@@ -281,6 +290,10 @@ class _Run:
         self.recorder = disc.recording(lambda d: results.Recorder(
             d, scheme.observer(d), sc["T"], sc["snapshots"], record_times,
             MAX_RECORDS_ADAPTIVE if every else MAX_RECORDS, every_step=every))
+        if n.space_tol > 0:
+            from ..discrete.estimator import Estimator
+
+            self.estimator = Estimator(disc, scheme.observer(disc))
         if self.resume is not None:
             restarts.restore(self.resume.state, disc, scheme, self.steps, self.recorder, self.resume.archive)
         origin = f"limit = {limit:g} m, as given" if limit is not None else \
@@ -289,7 +302,7 @@ class _Run:
         failure = None
         with results.Clock() as self.clock, task_manager(n.threads):
             try:
-                march(disc, scheme, self.steps, self.recorder.record, progress=self.progress, limit=limit,
+                march(disc, scheme, self.steps, self._observe(), progress=self.progress, limit=limit,
                       limit_origin=origin, resume=self.resume is not None, after_step=self._after_step())
             except Diverged as err:
                 failure = err
@@ -324,6 +337,25 @@ class _Run:
         if self.resume is None:
             return out
         return restarts.provenance(out, self.resume.archive, self.resume.path, self.resume.state["time"])
+
+    def _observe(self):
+        """The loop's output callback: the recorder's, and with space_tol > 0 the estimate in space at every recorded
+        time (``space_error_estimate(time)``; each element's largest indicator kept for marking)."""
+        recorder = self.recorder
+        if self.estimator is None:
+            return recorder.record
+
+        def observe(t, final=False, control=None):
+            wanted, snapshot = recorder.due(t, final)
+            if wanted:
+                e = self.estimator.evaluate(t)
+                self.indicators = e.indicators if self.indicators is None else np.maximum(self.indicators,
+                                                                                          e.indicators)
+                self.space_estimate, self.largest_norm = max(self.space_estimate, e.total), max(self.largest_norm, e.norm)
+                control = (control or {}) | {"space_error_estimate": e.total}  # (made relative by adapt.run)
+            recorder.take(t, wanted, snapshot, control=control)
+
+        return observe
 
     def _after_step(self):
         """The checkpoint writer the loop calls after each accepted step (None without checkpoints)."""

@@ -85,9 +85,9 @@ def compare_runs(case_scene, ds, ref_scene, R, compare) -> dict:
     coarse_sc, fine_sc = case_scene, ref_scene
     if not fine_first:
         coarse_sc, fine_sc = fine_sc, coarse_sc
-    ci, fi = transfer.mesh_info(coarse_sc), transfer.mesh_info(fine_sc)
-    tr = transfer.Transfer(ci, fi)
     cds, fds = (ds, R) if fine_first else (R, ds)
+    ci, fi = transfer.mesh_info(coarse_sc, cds), transfer.mesh_info(fine_sc, fds)
+    tr = transfer.Transfer(ci, fi)
     parts = []
     for t in compare:
         i_c, i_f = snapshot_index(cds, t), snapshot_index(fds, t)
@@ -225,13 +225,14 @@ def make(spec, scene, cases, axes, layout=None):
         series = _series(cases, axes, layout)
         if series is None:
             raise ParameterError("reference = 'extrapolated' needs one refinement series of three levels or more (one "
-                                 "of h, k, rtol, h_contact swept, or coupled levels such as k = 0.2 h)")
+                                 "of h, k, rtol, h_contact, space_tol swept, or coupled levels such as k = 0.2 h)")
         return DifferenceReference(cases, *series, describe=_EXTRAPOLATED)
     if isinstance(spec, str):
         if spec == "finest":
             # (error-controlled cases: the smallest tolerance; their k is only the first step)
-            best = min(cases, key=lambda c: (c.h, c.get("h_contact", 0.0), c.get("rtol", 0.0), c.k, -c.order,
-                                             c.scheme != "implicit"))
+            # (adapted meshes: the smallest space_tol; 0 is the mesh as given, the coarsest)
+            best = min(cases, key=lambda c: (c.h, c.get("h_contact", 0.0), c.get("space_tol", 0.0) or np.inf,
+                                             c.get("rtol", 0.0), c.k, -c.order, c.scheme != "implicit"))
             values = {k: v for k, v in best.values().items() if k in DISCRETISATION}
             return RunReference(cases, values, listed=False, describe="finest")
         if spec in ("ode", "exact"):

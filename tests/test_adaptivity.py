@@ -1,0 +1,129 @@
+"""Adaptive refinement in space: the a posteriori estimator against finer runs, and the loop that meets space_tol."""
+from __future__ import annotations
+
+import dataclasses
+import warnings
+
+import numpy as np
+import pytest
+
+import workbench
+from workbench.discrete.estimator import displacement, energy_error
+from workbench.errors import ParameterError
+from workbench.input.geometry import on_mesh
+from workbench.running import adapt
+
+
+def _estimate_only(sc, body, **kw):
+    """The run of ``sc`` on ``body``'s mesh with its estimate (max_dofs below the mesh's: no refinement, which warns)."""
+    model = dataclasses.replace(sc.model_of(), geometry=body)
+    with warnings.catch_warnings():
+        warnings.simplefilter("ignore", RuntimeWarning)
+        return workbench.run(sc, model=model, space_tol=0.5, max_dofs=100, progress=False, **kw)
+
+
+def _uniformly_refined(body, times: int):
+    m = body.mesh()
+    for _ in range(times):
+        m.Refine()
+    return on_mesh(body, m.ngmesh)
+
+
+def _effectivity(sc, bodies, reference_refinements: int):
+    """(dofs, estimate at T, true error at T) of runs on ``bodies``, the true error against the last one refined
+    uniformly ``reference_refinements`` times (nested meshes: the error is integrated exactly)."""
+    runs = [(b, _estimate_only(sc, b)) for b in bodies]
+    ref_body = _uniformly_refined(bodies[-1], reference_refinements)
+    with warnings.catch_warnings():
+        warnings.simplefilter("ignore", RuntimeWarning)
+        ref = workbench.run(sc, model=dataclasses.replace(sc.model_of(), geometry=ref_body), progress=False)
+    u_ref = displacement(ref_body, ref)
+    tensor, dim = sc.model_of().elastic, ref_body.dim
+    return [(ds.attrs["ndof"], float(ds.space_error_estimate[-1]), energy_error(displacement(b, ds), u_ref, tensor, dim))
+            for b, ds in runs]
+
+
+def test_effectivity_on_hertz_along_the_adaptive_meshes():
+    """Signorini Hertz (2D): the estimate over the true error (against a run on 16x the cells of the finest mesh)
+    stays within [0.8, 2] on three adapted meshes (measured 1.29, 1.19, 1.20 against a 70k-dof run,
+    studies/adaptivity.py), and both fall as the mesh is refined."""
+    sc = workbench.scene("memory_hertz")
+    bodies = [sc.model_of().geometry]
+    for _ in range(2):
+        bodies.append(adapt.refined(bodies[-1], _estimate_only(sc, bodies[-1])))
+    rows = _effectivity(sc, bodies, 2)
+    for ndof, estimate, error in rows:
+        assert 0.8 <= estimate / error <= 2.0, rows
+    assert rows[-1][1] < 0.75 * rows[0][1] and rows[-1][2] < 0.8 * rows[0][2], rows
+
+
+def test_effectivity_on_a_debonding_slab_model_a():
+    """Model A (Kelvin-Voigt, compliance and adhesion, the slab of tp4 pulled off its foundation, backward Euler):
+    effectivity within [0.5, 2] on two structured meshes against a run on 16x the cells."""
+    sc = workbench.scene("tp4", h=0.05, T=0.3, k=0.01, scheme="implicit")
+    body = sc.model_of().geometry
+    rows = _effectivity(sc, [body, _uniformly_refined(body, 1)], 2)
+    for ndof, estimate, error in rows:
+        assert 0.5 <= estimate / error <= 2.0, rows
+
+
+def test_space_tol_is_met_and_errors_fall_with_it():
+    """The loop stops at the first mesh whose largest estimate over the run is at most space_tol; a smaller tolerance
+    takes a finer mesh (the same sequence of meshes, further), and the estimates it records fall level by level."""
+    loose = workbench.run("memory_hertz", space_tol=0.12, progress=False)
+    tight = workbench.run("memory_hertz", space_tol=0.06, progress=False)
+    for ds, tol in ((loose, 0.12), (tight, 0.06)):
+        assert ds.attrs["space_stop"] == "met"
+        assert float(ds.space_error_estimate.max()) <= tol
+        assert ds.attrs["space_error_estimate"] == pytest.approx(float(ds.space_error_estimate.max()))
+        levels = ds.level_space_error_estimate.values
+        assert levels[-1] <= tol < levels[-2]  # (the previous mesh did not meet it)
+        assert int(ds.level_ndof[-1]) == ds.attrs["ndof"] == int(ds.ndof[-1])
+    assert np.all(np.diff(tight.level_space_error_estimate.values) < 0)
+    n = loose.sizes["level"]
+    assert tight.level_ndof.values[:n].tolist() == loose.level_ndof.values.tolist()
+    assert tight.attrs["ndof"] > loose.attrs["ndof"]
+    assert loose.space_indicator.sizes["cell"] == loose.sizes["cell"]  # (the final mesh in the archive, and where its
+    # error is)
+
+
+def test_max_dofs_bounds_the_mesh_with_a_warning(tmp_path):
+    with pytest.warns(RuntimeWarning, match="space_tol = 0.01 not met"):
+        ds = workbench.run("memory_hertz", space_tol=0.01, max_dofs=1500, progress=False)
+    assert ds.attrs["space_stop"] == "max_dofs" and ds.attrs["ndof"] <= 1500
+    assert ds.attrs["space_error_estimate"] > 0.01
+    path = tmp_path / "adapted.nc"
+    workbench.write(ds, path)  # (the levels' record and the attributes are netCDF-safe)
+    back = workbench.load(path)
+    assert back.level_ndof.values.tolist() == ds.level_ndof.values.tolist()
+    assert back.attrs["space_stop"] == "max_dofs"
+
+
+def test_space_tol_refused_where_it_cannot_work(tmp_path):
+    with pytest.raises(ParameterError, match="space_tol = 0.1: a rod's mesh cannot be refined"):
+        workbench.run("tp1", space_tol=0.1, progress=False)
+    with pytest.raises(ParameterError, match="checkpoint_every = 2 with space_tol"):
+        workbench.scene("memory_hertz", space_tol=0.1, checkpoint_every=2)
+    with pytest.raises(ParameterError, match="space_tol"):
+        workbench.scene("memory_hertz", space_tol=0.9)
+    ds = workbench.run("memory_hertz", space_tol=0.2, T=0.5, progress=False)
+    path = tmp_path / "adapted.nc"
+    workbench.write(ds, path)
+    with pytest.raises(ParameterError, match="refined adaptively"):
+        workbench.run(restart=path, T=1.0, progress=False)
+
+
+def test_a_study_sweeps_space_tol():
+    """space_tol is a Study axis: the cases are compared on their own adapted meshes (the archive's adapted_mesh),
+    their dofs grow and their errors fall as space_tol falls, with the whole adaptive loop as their cost; with two
+    levels the finest is the smallest space_tol (not the mesh as given)."""
+    with warnings.catch_warnings():
+        warnings.simplefilter("ignore", RuntimeWarning)  # (the finest-case reference of a two-level sweep is biased)
+        ds = workbench.Study("memory_hertz", sweep={"space_tol": [0.15, 0.08, 0.04]}, T=0.5).run(progress=False)
+        two = workbench.Study("memory_hertz", sweep={"space_tol": [0.15, 0.08]}, T=0.5).run(progress=False)
+    assert ds.attrs["reference"].startswith("auto: extrapolated")
+    ndof, err = ds.ndof.values.ravel(), ds.error_V.values.ravel()
+    assert np.all(np.diff(ndof) > 0) and np.all(np.diff(err) < 0), (ndof, err)
+    assert np.all(ds.status.values == "complete")
+    e = two.error_V.values.ravel()
+    assert e[0] > 0 and np.isnan(e[1]), e  # (0.08 is the reference, not reported)

@@ -1,0 +1,174 @@
+"""A posteriori estimate of the error in space: per element and in total, in the energy norm of the elastic tensor.
+
+The error a mesh makes in a contact problem lives at a few places (the edges of the contact zone, a debonding
+front, a clamp's corner). This estimator finds them from the discrete solution alone, in two parts:
+
+* **volume** (Zienkiewicz–Zhu): the strain eps(u_h), discontinuous across elements, is recovered as a continuous
+  field eps* of the displacement's order (NGSolve's ``Set`` into H1: local projections averaged at shared dofs), and
+  eta_K^2 = int_K C (eps* - eps_h) : (eps* - eps_h) dx, with C the elastic tensor (Model A's G, Model B's A);
+* **contact** (the residual of the traction balance on the contact side): eta_E^2 = (h_E / C_ref) int_E
+  (sigma_h nu . nu + p_h)^2 da on each contact facet E, where sigma_h is the whole stress of the scheme (viscous and
+  memory parts included), p_h the contact pressure the run records (interpolated linearly between the contact
+  vertices; the recovered one where there is one) and C_ref the largest diagonal entry of C's Voigt matrix (the
+  scale that turns a traction into energy). A facet's share joins the element it bounds.
+
+The total is eta = sqrt(sum eta_K^2 + sum eta_E^2); a run reports it relative to the largest energy norm
+||u_h||_C = (int C eps(u_h) : eps(u_h))^(1/2) over the run (:mod:`workbench.running.adapt`: relative to the norm at the
+same time, a body just loaded would have an arbitrary relative error).
+How well eta tracks the true error (its effectivity index) is measured, not assumed: ``docs/adaptivity.md``.
+
+Examples
+--------
+>>> import numpy as np, workbench
+>>> from workbench.discrete.discretisation import build
+>>> from workbench.schemes import scheme_class
+>>> d = build(workbench.scene("memory_hertz", h=0.2, h_contact=0.02, T=0.1, k=0.1))
+>>> s = scheme_class("vi")(d)
+>>> s.start(0.0); s.step(0.0, 0.1)
+>>> est = Estimator(d, s.observer(d))
+>>> e = est.evaluate(0.1)
+>>> 0 < e.total < e.norm, e.volume.shape == (d.mesh.ne,), bool(np.all(e.contact >= 0))
+(True, True, True)
+"""
+from __future__ import annotations
+
+from dataclasses import dataclass
+
+import numpy as np
+
+from ..physics.kelvin_voigt import strain
+
+
+@dataclass(frozen=True)
+class Estimate:
+    """One evaluation of the estimator: eta_K^2 per element (``volume``, ``contact``: the element's contact facets),
+    the total eta and the energy norm of u_h."""
+
+    volume: np.ndarray
+    contact: np.ndarray
+    total: float
+    norm: float
+
+    @property
+    def indicators(self) -> np.ndarray:
+        """eta_K^2, both parts, per element (what marking uses)."""
+        return self.volume + self.contact
+
+
+class Estimator:
+    """The estimator of one discretisation and the scheme's observer (module docs); :meth:`evaluate` reads the state
+    the scheme holds now."""
+
+    def __init__(self, disc, observer):
+        import ngsolve as ngs
+
+        d, dim = disc, disc.dim
+        self.d, self.observer = d, observer
+        mesh, tensor = d.mesh, d.model.elastic
+        eps = strain(d.u, dim)
+        self._eps_flat = ngs.CF(tuple(eps[i, j] for i in range(dim) for j in range(dim)))
+        self.recovered = ngs.GridFunction(ngs.H1(mesh, order=d.numerics.order, dim=dim * dim))
+        star = ngs.CF(tuple(self.recovered[i] for i in range(dim * dim)), dims=(dim, dim))
+        self._volume = ngs.InnerProduct(tensor(star - eps), star - eps)
+        self._energy = ngs.InnerProduct(tensor(eps), eps)
+        self._contact = None
+        if d.contact_name and len(d.node_dofs):
+            self._contact_part(ngs, tensor)
+
+    def _contact_part(self, ngs, tensor) -> None:
+        """The traction residual on the contact facets and the element each facet bounds."""
+        d, dim, mesh = self.d, self.d.dim, self.d.mesh
+        self.c_ref = float(np.max(np.diag(tensor.voigt(dim))))
+        self.parts = [(t, ngs.GridFunction(d.fes)) for t, _ in self.observer.stress_parts()]
+        stresses = [t(strain(g, dim)) for t, g in self.parts]
+        sigma = stresses[0]
+        for more in stresses[1:]:  # (Python's sum starts from the number 0, which a matrix CF cannot add)
+            sigma = sigma + more
+        self.pressure = ngs.GridFunction(ngs.H1(mesh, order=1))
+        n = ngs.specialcf.normal(dim)
+        residual = ngs.InnerProduct(sigma * n, n) + self.pressure
+        g = d.geometry
+        gap = ((ngs.x, ngs.y, ngs.z)[g.normal_axis] if g.curved else ngs.CF(0.0)) - g.normal_sign * d.u[g.normal_axis]
+        # (complementarity: a pressure where the side is open; between the vertices only, at the contact zone's edge)
+        open_pressed = ngs.IfPos(self.pressure, self.pressure, 0.0) * ngs.IfPos(gap, gap, 0.0)
+        self._contact = ngs.specialcf.mesh_size / self.c_ref * residual * residual + open_pressed
+        self._region = mesh.Boundaries(d.contact_name)
+        facets = np.array([el.nr for el in self._region.Elements()], dtype=np.int64)
+        self._facet_elements = facets, np.array([_volume_element(mesh, i) for i in facets], dtype=np.int64)
+
+    def evaluate(self, t: float | None = None) -> Estimate:
+        """The estimate of the state the scheme holds at time ``t``."""
+        import ngsolve as ngs
+
+        mesh = self.d.mesh
+        self.recovered.Set(self._eps_flat)
+        volume = np.maximum(np.asarray(ngs.Integrate(self._volume, mesh, element_wise=True)), 0.0)
+        contact = np.zeros(mesh.ne)
+        if self._contact is not None:
+            contact = self._contact_indicators(t)
+        norm = float(np.sqrt(max(ngs.Integrate(self._energy, mesh), 0.0)))
+        return Estimate(volume, contact, float(np.sqrt(volume.sum() + contact.sum())), norm)
+
+    def _contact_indicators(self, t) -> np.ndarray:
+        import ngsolve as ngs
+
+        d, mesh = self.d, self.d.mesh
+        for (_, g), (_, vector) in zip(self.parts, self.observer.stress_parts()):
+            g.vec.FV().NumPy()[:] = vector
+        values = self.observer.node_values(t)
+        p = values.get("contact_pressure_recovered", values.get("contact_pressure"))
+        nodal = self.pressure.vec.FV().NumPy()
+        nodal[:] = 0.0
+        if p is not None:
+            nodal[d.vertex_numbers] = np.nan_to_num(np.asarray(p, dtype=float))
+        per_facet = np.asarray(ngs.Integrate(self._contact, mesh, ngs.BND, element_wise=True, definedon=self._region))
+        facets, elements = self._facet_elements
+        out = np.zeros(mesh.ne)
+        np.add.at(out, elements, np.maximum(per_facet[facets], 0.0))
+        return out
+
+
+def _volume_element(mesh, facet: int) -> int:
+    """The volume element a boundary element of the mesh bounds."""
+    import ngsolve as ngs
+
+    el = mesh[ngs.ElementId(ngs.BND, facet)]
+    shared = mesh[el.facets[0]].elements
+    return shared[0].nr
+
+
+def displacement(body, ds, snapshot: int = -1):
+    """The displacement of a run's snapshot as a GridFunction on the run's mesh (``body.mesh()``: the scene's
+    geometry, or :func:`workbench.input.geometry.on_mesh` of an adapted one) and its mesh."""
+    import ngsolve as ngs
+
+    from .discretisation import vector_space
+
+    mesh = body.mesh()
+    u = ngs.GridFunction(vector_space(body, mesh, int(ds.attrs["order"])))
+    u.vec.FV().NumPy()[:] = ds.u_dofs.values[snapshot]
+    return u
+
+
+def energy_error(u, u_ref, tensor, dim: int) -> float:
+    """||u - u_ref||_C / ||u_ref||_C, the energy norm of ``tensor`` integrated on ``u_ref``'s mesh (a finer run's:
+    ``u`` is evaluated there, exactly where the finer mesh refines ``u``'s, as the adaptive meshes do).
+
+    Examples
+    --------
+    >>> import ngsolve as ngs
+    >>> from workbench.input.geometry import Slab
+    >>> g = Slab(width=1.0, height=0.1, h=0.05)
+    >>> from workbench.discrete.discretisation import vector_space
+    >>> from workbench.physics.kelvin_voigt import from_young
+    >>> m = g.mesh(); u = ngs.GridFunction(vector_space(g, m, 1)); u.Set(ngs.CF((ngs.x * ngs.y, 0)))
+    >>> round(energy_error(u, u, from_young(1000.0, 0.3, 2), 2), 12)
+    0.0
+    """
+    import ngsolve as ngs
+
+    mesh = u_ref.space.mesh
+    e = strain(u, dim) - strain(u_ref, dim)
+    ref = strain(u_ref, dim)
+    error = ngs.Integrate(ngs.InnerProduct(tensor(e), e), mesh, order=2 * u_ref.space.globalorder)
+    return float(np.sqrt(max(error, 0.0) / ngs.Integrate(ngs.InnerProduct(tensor(ref), ref), mesh)))

@@ -1,0 +1,143 @@
+"""Adaptive refinement in space (``space_tol > 0``): run, estimate, mark, refine, run again.
+
+A quasistatic contact problem with history (memory, bonding, a growing contact zone) is refined here by repeating
+the whole run on each mesh, not by changing the mesh during a run: the estimator
+(:mod:`workbench.discrete.estimator`) is evaluated at every recorded time, each element keeps the largest
+indicator it had over the run, and the elements that carry the share ``DORFLER`` of the sum of those are bisected
+(Dörfler marking; netgen keeps the curved sides on their geometry). So the final mesh is fine wherever the solution
+needed it at any time (the edge of a contact zone at all its radii), and the run on it is an ordinary run, with no
+transfer of state between meshes. It stops when the largest relative estimate over the run is at most
+``space_tol``, or when refining again would exceed ``max_dofs`` dofs, or after ``MAX_LEVELS`` meshes.
+
+The Dataset is the run on the final mesh, with ``space_error_estimate(time)``, ``ndof(time)``, the meshes' history
+(``level_ndof(level)``, ``level_space_error_estimate(level)``, ``level_wall_time(level)``) and the attributes
+``space_error_estimate`` (the final run's largest), ``space_levels``, ``space_stop`` (why it stopped) and
+``adaptive_wall_time`` (all levels; ``setup_time`` counts the meshes before the final one, so that setup and time
+loop together are the whole cost); its snapshots carry the final mesh (UGRID) and ``space_indicator(cell)`` says
+where the final mesh's error is. ``max_dofs`` at or below the given mesh's dofs estimates without refining.
+"""
+from __future__ import annotations
+
+import dataclasses
+import warnings
+
+import numpy as np
+import xarray as xr
+
+from ..input.geometry import on_mesh
+from ..input.meshes import to_text
+
+#: The share of the summed squared indicators the marked elements carry.
+DORFLER = 0.5
+#: The most meshes an adaptive run tries.
+MAX_LEVELS = 15
+
+
+def mark(indicators: np.ndarray, share: float = DORFLER) -> np.ndarray:
+    """The smallest set of elements whose indicators (eta_K^2) add up to ``share`` of their sum (Dörfler).
+
+    >>> mark(np.array([1.0, 5.0, 0.5, 3.0]), 0.5).tolist()
+    [False, True, False, False]
+    >>> mark(np.array([1.0, 5.0, 0.5, 3.0]), 0.7).tolist()
+    [False, True, False, True]
+    """
+    order = np.argsort(indicators)[::-1]
+    reached = np.cumsum(indicators[order]) >= share * indicators.sum() * (1 - 1e-12)
+    out = np.zeros(len(indicators), dtype=bool)
+    out[order[:int(np.argmax(reached)) + 1]] = True
+    return out
+
+
+def refine(mesh, marked: np.ndarray):
+    """The netgen mesh of ``mesh`` (an NGSolve mesh) with the ``marked`` elements bisected (a copy: ``mesh`` is kept)."""
+    import ngsolve as ngs
+
+    fine = ngs.Mesh(mesh.ngmesh.Copy())
+    for el in fine.Elements(ngs.VOL):
+        fine.SetRefinementFlag(el, bool(marked[el.nr]))
+    fine.Refine()
+    return fine.ngmesh
+
+
+def refined(body, ds: xr.Dataset):
+    """The body on its mesh (``body.mesh()``, on which ``ds`` was run) refined where the run's indicators
+    (``space_indicator``) ask, by Dörfler marking: the next mesh of the adaptive loop.
+
+    Examples
+    --------
+    >>> import warnings, workbench
+    >>> sc = workbench.scene("memory_hertz", h=0.2, h_contact=0.02, T=0.5, k=0.5)
+    >>> with warnings.catch_warnings():
+    ...     warnings.simplefilter("ignore")  # (max_dofs below the mesh's: estimate only, which warns)
+    ...     ds = workbench.run(sc, space_tol=0.01, max_dofs=100, progress=False)
+    >>> body = sc.model_of().geometry
+    >>> finer = refined(body, ds)
+    >>> body.mesh().ne < finer.mesh().ne
+    True
+    """
+    return on_mesh(body, refine(body.mesh(), mark(ds.space_indicator.values ** 2)))
+
+
+def displacement_dofs(ngmesh, geometry, order: int) -> int:
+    """The dofs of the displacement space on a mesh (before any work on it)."""
+    import ngsolve as ngs
+
+    from ..discrete.discretisation import vector_space
+
+    return vector_space(geometry, ngs.Mesh(ngmesh), order).ndof
+
+
+def run(make_job, model, numerics, execute_args: tuple):
+    """The adaptive loop (module docs): ``make_job(model)`` builds a run of the model (a runner ``_Run`` that
+    estimates), ``execute_args`` are its ``execute``'s arguments. Returns the final run's Dataset."""
+    levels, ds = [], None
+    while True:
+        job = make_job(model)
+        ds = job.execute(*execute_args)
+        scale = job.largest_norm if job.largest_norm > 0 else 1.0  # (the estimates relative to the largest norm)
+        ds["space_error_estimate"] = ds.space_error_estimate / scale
+        ds["space_indicator"] = ("cell", np.sqrt(job.indicators) / scale, {
+            "units": "1", "long_name": "the element's largest error indicator over the run (both parts), relative "
+            "to the largest energy norm of u: what marking used"})
+        levels.append((job.disc.ndof, job.space_estimate / scale, ds.attrs["setup_time"] + ds.attrs["wall_time"]))
+        stop = _stop(levels, numerics)
+        if stop:
+            break
+        geometry = refined(model.geometry, ds)
+        if displacement_dofs(geometry.adapted_mesh, geometry, numerics.order) > numerics.max_dofs:
+            stop = "max_dofs"
+            break
+        model = dataclasses.replace(model, geometry=geometry)
+    if stop != "met":
+        warnings.warn(f"space_tol = {numerics.space_tol:g} not met: the estimate is {levels[-1][1]:.3g} at "
+                      f"{levels[-1][0]} dofs ({'max_dofs' if stop == 'max_dofs' else f'{MAX_LEVELS} meshes'} "
+                      "reached)", RuntimeWarning, stacklevel=4)
+    return _with_levels(ds, levels, stop, model.geometry)
+
+
+def _stop(levels: list, numerics) -> str:
+    ndof, estimate, _ = levels[-1]
+    if estimate <= numerics.space_tol:
+        return "met"
+    if ndof >= numerics.max_dofs:
+        return "max_dofs"
+    if len(levels) >= MAX_LEVELS:
+        return "levels"
+    return ""
+
+
+def _with_levels(ds: xr.Dataset, levels: list, stop: str, body) -> xr.Dataset:
+    ndof, estimate, wall = (np.array(column) for column in zip(*levels))
+    level = np.arange(len(levels))
+    ds = ds.assign_coords(level=("level", level))
+    ds["level_ndof"] = ("level", ndof.astype(np.int64))
+    ds["level_space_error_estimate"] = ("level", estimate)
+    ds["level_wall_time"] = ("level", wall)
+    ds["ndof"] = ("time", np.full(ds.sizes["time"], ndof[-1], dtype=np.int64))
+    ds["level_wall_time"].attrs["units"] = "s"
+    if len(levels) > 1:  # (the final mesh, to compare the run with others on theirs: geometry.of_run)
+        ds["adapted_mesh"] = ((), to_text(body.adapted_mesh), {"long_name": "the adapted mesh (netgen .vol text)"})
+    # (the meshes before the final one count as its setup: a study's cost, setup + time loop, is the whole loop's)
+    ds.attrs.update(space_error_estimate=float(estimate[-1]), space_levels=len(levels), space_stop=stop,
+                    adaptive_wall_time=float(wall.sum()), setup_time=ds.attrs["setup_time"] + float(wall[:-1].sum()))
+    return ds
