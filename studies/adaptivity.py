@@ -1,0 +1,152 @@
+"""Adaptive meshes against the built-in contact-zone refinement: the estimator's effectivity and what the dofs buy.
+
+    python studies/adaptivity.py [--levels 7] [--three-d LEVELS] [--out data/adaptivity]
+
+For ``memory_hertz`` (2D Signorini Hertz) it follows the adaptive loop of ``space_tol > 0`` level by level (the same
+meshes: :func:`workbench.running.adapt.refined` of each run) and reports per level the dofs, the estimate at T, the
+true error at T in the energy norm against a run on the finest adapted mesh refined uniformly twice (16x the cells;
+nested meshes, so the error is integrated exactly), the effectivity index (estimate / true error), the contact
+pressure's L2 error against Hertz (lumped and recovered) and the cumulative cost of the loop. Beside it, the built-in
+refinement (``h_contact`` = 0.01 ... 0.00125) on the same measures of the pressure. The slab of tp4 (Model A,
+debonding, backward Euler) gives the effectivity on structured meshes. With ``--three-d N``, ``memory_hertz3d`` for
+N adaptive levels (the pressure's errors and the cost; the effectivity of the first levels against the third level
+refined once). Writes ``adaptivity.csv``, ``adaptivity_mesh.png`` (the final 2D mesh, whole and at the contact zone)
+and prints the tables of docs/adaptivity.md. One thread.
+"""
+from __future__ import annotations
+
+import argparse
+import csv
+import dataclasses
+import time
+import warnings
+from pathlib import Path
+
+from threadpoolctl import threadpool_limits
+
+import workbench
+from workbench.discrete.estimator import energy_error
+from workbench.input.geometry import on_mesh
+from workbench.references import hertz
+from workbench.running import adapt
+
+
+def run_on(sc, body, estimate=True):
+    """The run of ``sc`` on ``body``'s mesh (with its estimate: max_dofs below the mesh's, no refinement) and its
+    wall time."""
+    model = dataclasses.replace(sc.model_of(), geometry=body)
+    extra = dict(space_tol=0.5, max_dofs=100) if estimate else {}
+    t0 = time.perf_counter()
+    with warnings.catch_warnings():
+        warnings.simplefilter("ignore", RuntimeWarning)
+        ds = workbench.run(sc, model=model, progress=False, **extra)
+    return ds, time.perf_counter() - t0
+
+
+def refined_uniformly(body, times):
+    m = body.mesh()
+    for _ in range(times):
+        m.Refine()
+    return on_mesh(body, m.ngmesh)
+
+
+def pressure(ds):
+    out = {}
+    for name, variable in (("lumped", "contact_pressure"), ("recovered", "contact_pressure_recovered")):
+        r = hertz.profile(ds, variable=variable)
+        out[f"p_l2_{name}"] = r["l2"]
+    return out
+
+
+def effectivity(sc, runs, reference_refinements):
+    """The true errors of ``runs`` [(body, ds)] at T against the last body refined uniformly, and the reference's
+    dofs."""
+    ref_body = refined_uniformly(runs[-1][0], reference_refinements)
+    ref, _ = run_on(sc, ref_body, estimate=False)
+    tensor = sc.model_of().elastic
+    return [energy_error(b, ds, ref_body, ref, tensor) for b, ds in runs], ref.attrs["ndof"]
+
+
+def adaptive_levels(sc, levels, case, rows, reference_refinements, effectivity_levels=None):
+    body, runs, cost = sc.model_of().geometry, [], 0.0
+    for level in range(levels):
+        ds, wall = run_on(sc, body)
+        cost += wall
+        runs.append((body, ds))
+        rows.append(dict(case=case, mesh="adaptive", level=level, ndof=ds.attrs["ndof"],
+                         estimate=float(ds.space_error_estimate[-1]), cost=round(cost, 2), **pressure(ds)))
+        print(rows[-1], flush=True)
+        if level + 1 < levels:
+            body = adapt.refined(body, ds)
+    chosen = runs[:effectivity_levels]
+    errors, ref_ndof = effectivity(sc, chosen, reference_refinements)
+    for row, error in zip(rows[-levels:], errors):
+        row.update(true_error=error, effectivity=row["estimate"] / error, reference_ndof=ref_ndof)
+        print(case, row["ndof"], "true", round(error, 5), "effectivity", round(row["effectivity"], 3), flush=True)
+    return runs[-1]
+
+
+def built_in(name, sizes, rows):
+    for hc in sizes:
+        t0 = time.perf_counter()
+        ds = workbench.run(name, h_contact=hc, progress=False)
+        rows.append(dict(case=name, mesh=f"h_contact={hc}", ndof=ds.attrs["ndof"],
+                         cost=round(time.perf_counter() - t0, 2), **pressure(ds)))
+        print(rows[-1], flush=True)
+
+
+def mesh_figure(ds, path):
+    import matplotlib
+    matplotlib.use("Agg")
+    import matplotlib.pyplot as plt
+
+    x, y, cells = ds.vertex_x.values, ds.vertex_y.values, ds.cell_vertices.values
+    fig, axes = plt.subplots(1, 2, figsize=(11, 5))
+    for ax, (xlim, ylim) in zip(axes, (((0, 1), (0, 1)), ((0, 0.16), (0, 0.08)))):
+        ax.triplot(x, y, cells, lw=0.3, color="k")
+        ax.set_xlim(*xlim)
+        ax.set_ylim(*ylim)
+        ax.set_aspect("equal")
+    a = hertz.profile(ds)["a"]
+    axes[1].axvline(a, color="r", lw=0.8, label=f"Hertz's a = {a:.4f}")
+    axes[1].legend(loc="upper right")
+    axes[0].set_title(f"memory_hertz adapted: {ds.attrs['ndof']} dofs")
+    axes[1].set_title("the contact zone")
+    fig.tight_layout()
+    fig.savefig(path, dpi=130)
+
+
+def main():
+    parser = argparse.ArgumentParser(description=__doc__.splitlines()[0])
+    parser.add_argument("--levels", type=int, default=7)
+    parser.add_argument("--three-d", type=int, default=0)
+    parser.add_argument("--out", default="data/adaptivity")
+    args = parser.parse_args()
+    out = Path(args.out)
+    out.mkdir(parents=True, exist_ok=True)
+    rows = []
+    with threadpool_limits(1):
+        _, final = adaptive_levels(workbench.scene("memory_hertz"), args.levels, "memory_hertz", rows, 2)
+        mesh_figure(final, out / "adaptivity_mesh.png")
+        built_in("memory_hertz", [0.01, 0.005, 0.0025, 0.00125], rows)
+        slab = workbench.scene("tp4", h=0.05, T=0.3, k=0.01, scheme="implicit")
+        body = slab.model_of().geometry
+        runs = [(b, run_on(slab, b)[0]) for b in (body, refined_uniformly(body, 1))]
+        errors, ref_ndof = effectivity(slab, runs, 2)
+        for (b, ds), error in zip(runs, errors):
+            est = float(ds.space_error_estimate[-1])
+            rows.append(dict(case="tp4 implicit T=0.3", mesh="uniform", ndof=ds.attrs["ndof"], estimate=est,
+                             true_error=error, effectivity=est / error, reference_ndof=ref_ndof))
+            print(rows[-1], flush=True)
+        if args.three_d:
+            sc3 = workbench.scene("memory_hertz3d")
+            adaptive_levels(sc3, args.three_d, "memory_hertz3d", rows, 1, effectivity_levels=3)
+    fields = list(dict.fromkeys(k for row in rows for k in row))
+    with open(out / "adaptivity.csv", "w", newline="") as f:
+        writer = csv.DictWriter(f, fieldnames=fields)
+        writer.writeheader()
+        writer.writerows({k: (round(v, 6) if isinstance(v, float) else v) for k, v in row.items()} for row in rows)
+
+
+if __name__ == "__main__":
+    main()
