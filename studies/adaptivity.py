@@ -126,7 +126,7 @@ def main():
     out.mkdir(parents=True, exist_ok=True)
     rows = []
     with threadpool_limits(1):
-        _, final = adaptive_levels(workbench.scene("memory_hertz"), args.levels, "memory_hertz", rows, 2)
+        _, final = adaptive_levels(workbench.scene("memory_hertz", h_contact=0.01), args.levels, "memory_hertz", rows, 2)
         mesh_figure(final, out / "adaptivity_mesh.png")
         built_in("memory_hertz", [0.01, 0.005, 0.0025, 0.00125], rows)
         slab = workbench.scene("tp4", h=0.05, T=0.3, k=0.01, scheme="implicit")

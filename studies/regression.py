@@ -50,8 +50,8 @@ CASES = {
     "memory_slab_p2_trapezoid": ("memory_slab", {"h": 0.2, "order": 2, "memory_rule": "trapezoid"}),
     "memory_slab_rtol": ("memory_slab", {"h": 0.2, "rtol": 1e-3}),
     "hertz": ("hertz", {"h": 0.2, "T": 0.5}),
-    "memory_hertz": ("memory_hertz", {"h": 0.2}),
-    "memory_hertz_p2": ("memory_hertz", {"h": 0.2, "order": 2}),
+    "memory_hertz": ("memory_hertz", {"h": 0.2, "h_contact": 0.02}),  # (h_contact: the default before 2026-12-03)
+    "memory_hertz_p2": ("memory_hertz", {"h": 0.2, "order": 2, "h_contact": 0.02}),
     "hertz3d": ("hertz3d", {"h": 0.3, "h_contact": 0.06, "T": 0.2, "k": 0.1}),
     "memory_hertz3d": ("memory_hertz3d", {"h": 0.3, "h_contact": 0.06}),
     "block": ("block", {"h": 0.1, "T": 0.005}),

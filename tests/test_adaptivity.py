@@ -46,7 +46,7 @@ def test_effectivity_on_hertz_along_the_adaptive_meshes():
     """Signorini Hertz (2D): the estimate over the true error (against a run on 16x the cells of the finest mesh)
     stays within [0.8, 2] on three adapted meshes (measured 1.29, 1.19, 1.20 against a 70k-dof run,
     studies/adaptivity.py), and both fall as the mesh is refined."""
-    sc = workbench.scene("memory_hertz")
+    sc = workbench.scene("memory_hertz", h_contact=0.01)
     bodies = [sc.model_of().geometry]
     for _ in range(2):
         bodies.append(adapt.refined(bodies[-1], _estimate_only(sc, bodies[-1])))
@@ -69,8 +69,8 @@ def test_effectivity_on_a_debonding_slab_model_a():
 def test_space_tol_is_met_and_errors_fall_with_it():
     """The loop stops at the first mesh whose largest estimate over the run is at most space_tol; a smaller tolerance
     takes a finer mesh (the same sequence of meshes, further), and the estimates it records fall level by level."""
-    loose = workbench.run("memory_hertz", space_tol=0.12, progress=False)
-    tight = workbench.run("memory_hertz", space_tol=0.06, progress=False)
+    loose = workbench.run("memory_hertz", h_contact=0.01, space_tol=0.12, progress=False)
+    tight = workbench.run("memory_hertz", h_contact=0.01, space_tol=0.06, progress=False)
     for ds, tol in ((loose, 0.12), (tight, 0.06)):
         assert ds.attrs["space_stop"] == "met"
         assert float(ds.space_error_estimate.max()) <= tol
@@ -88,7 +88,7 @@ def test_space_tol_is_met_and_errors_fall_with_it():
 
 def test_max_dofs_bounds_the_mesh_with_a_warning(tmp_path):
     with pytest.warns(RuntimeWarning, match="space_tol = 0.01 not met"):
-        ds = workbench.run("memory_hertz", space_tol=0.01, max_dofs=1500, progress=False)
+        ds = workbench.run("memory_hertz", h_contact=0.01, space_tol=0.01, max_dofs=1500, progress=False)
     assert ds.attrs["space_stop"] == "max_dofs" and ds.attrs["ndof"] <= 1500
     assert ds.attrs["space_error_estimate"] > 0.01
     path = tmp_path / "adapted.nc"
@@ -102,10 +102,10 @@ def test_space_tol_refused_where_it_cannot_work(tmp_path):
     with pytest.raises(ParameterError, match="space_tol = 0.1: a rod's mesh cannot be refined"):
         workbench.run("tp1", space_tol=0.1, progress=False)
     with pytest.raises(ParameterError, match="checkpoint_every = 2 with space_tol"):
-        workbench.scene("memory_hertz", space_tol=0.1, checkpoint_every=2)
+        workbench.scene("memory_hertz", h_contact=0.01, space_tol=0.1, checkpoint_every=2)
     with pytest.raises(ParameterError, match="space_tol"):
-        workbench.scene("memory_hertz", space_tol=0.9)
-    ds = workbench.run("memory_hertz", space_tol=0.2, T=0.5, progress=False)
+        workbench.scene("memory_hertz", h_contact=0.01, space_tol=0.9)
+    ds = workbench.run("memory_hertz", h_contact=0.01, space_tol=0.2, T=0.5, progress=False)
     path = tmp_path / "adapted.nc"
     workbench.write(ds, path)
     with pytest.raises(ParameterError, match="refined adaptively"):
@@ -118,8 +118,8 @@ def test_a_study_sweeps_space_tol():
     levels the finest is the smallest space_tol (not the mesh as given)."""
     with warnings.catch_warnings():
         warnings.simplefilter("ignore", RuntimeWarning)  # (the finest-case reference of a two-level sweep is biased)
-        ds = workbench.Study("memory_hertz", sweep={"space_tol": [0.15, 0.08, 0.04]}, T=0.5).run(progress=False)
-        two = workbench.Study("memory_hertz", sweep={"space_tol": [0.15, 0.08]}, T=0.5).run(progress=False)
+        ds = workbench.Study("memory_hertz", h_contact=0.01, sweep={"space_tol": [0.15, 0.08, 0.04]}, T=0.5).run(progress=False)
+        two = workbench.Study("memory_hertz", h_contact=0.01, sweep={"space_tol": [0.15, 0.08]}, T=0.5).run(progress=False)
     assert ds.attrs["reference"].startswith("auto: extrapolated")
     ndof, err = ds.ndof.values.ravel(), ds.error_V.values.ravel()
     assert np.all(np.diff(ndof) > 0) and np.all(np.diff(err) < 0), (ndof, err)
