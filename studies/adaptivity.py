@@ -1,6 +1,6 @@
 """Adaptive meshes against the built-in contact-zone refinement: the estimator's effectivity and what the dofs buy.
 
-    python studies/adaptivity.py [--levels 7] [--three-d LEVELS] [--out data/adaptivity]
+    python studies/adaptivity.py [--levels 7] [--three-d LEVELS] [--lee-radok] [--out data/adaptivity]
 
 For ``memory_hertz`` (2D Signorini Hertz) it follows the adaptive loop of ``space_tol > 0`` level by level (the same
 meshes: :func:`workbench.running.adapt.refined` of each run) and reports per level the dofs, the estimate at T, the
@@ -10,7 +10,8 @@ pressure's L2 error against Hertz (lumped and recovered) and the cumulative cost
 refinement (``h_contact`` = 0.01 ... 0.00125) on the same measures of the pressure. The slab of tp4 (Model A,
 debonding, backward Euler) gives the effectivity on structured meshes. With ``--three-d N``, ``memory_hertz3d`` for
 N adaptive levels (the pressure's errors and the cost; the effectivity of the first levels against the third level
-refined once). Writes ``adaptivity.csv``, ``adaptivity_mesh.png`` (the final 2D mesh, whole and at the contact zone)
+refined once). ``--lee-radok`` (alone): the viscoelastic Hertz's contact radius against Lee and Radok's, built-in
+zones against space_tol (``lee_radok.csv``). Writes ``adaptivity.csv``, ``adaptivity_mesh.png`` (the final 2D mesh, whole and at the contact zone)
 and prints the tables of docs/adaptivity.md. One thread.
 """
 from __future__ import annotations
@@ -95,6 +96,29 @@ def built_in(name, sizes, rows):
         print(rows[-1], flush=True)
 
 
+def lee_radok(rows):
+    """Model A's viscoelastic Hertz (c_nu = 1e7, A = 0.2 G, BDF2): the last vertex in contact against Lee and Radok's
+    a(t), the largest error over the recorded times from t = 0.2 s and from 0.5 s, built-in zones against space_tol."""
+    base = dict(c_nu=1e7, tau=0.2, k=0.02, scheme="bdf2", snapshots=(), progress=False)
+    for label, kw in (("h_contact=0.0025", dict(h_contact=0.0025)), ("h_contact=0.00125", dict(h_contact=0.00125)),
+                      ("space_tol=0.05", dict(space_tol=0.05)), ("space_tol=0.03", dict(space_tol=0.03))):
+        t0 = time.perf_counter()
+        with warnings.catch_warnings():
+            warnings.simplefilter("ignore", RuntimeWarning)
+            ds = workbench.run("hertz", **base, **kw)
+        wall = time.perf_counter() - t0
+        errors = {0.2: 0.0, 0.5: 0.0}
+        for t in ds.time.values[1:]:
+            a = hertz.lee_radok(t, rate=10.0, R=1.0, E=1000.0, nu=0.3, tau=0.2, body="cylinder")
+            off = abs(hertz.profile(ds, t)["a_last"] / a - 1)
+            for start in errors:
+                if t >= start - 1e-12:
+                    errors[start] = max(errors[start], off)
+        rows.append(dict(case="hertz Lee-Radok", mesh=label, ndof=ds.attrs["ndof"], cost=round(wall, 2),
+                         radius_error_from_0_2=errors[0.2], radius_error_from_0_5=errors[0.5]))
+        print(rows[-1], flush=True)
+
+
 def mesh_figure(ds, path):
     import matplotlib
     matplotlib.use("Agg")
@@ -120,11 +144,16 @@ def main():
     parser = argparse.ArgumentParser(description=__doc__.splitlines()[0])
     parser.add_argument("--levels", type=int, default=7)
     parser.add_argument("--three-d", type=int, default=0)
+    parser.add_argument("--lee-radok", action="store_true", help="only the growing contact zone (lee_radok.csv)")
     parser.add_argument("--out", default="data/adaptivity")
     args = parser.parse_args()
     out = Path(args.out)
     out.mkdir(parents=True, exist_ok=True)
     rows = []
+    if args.lee_radok:
+        with threadpool_limits(1):
+            lee_radok(rows)
+        return write(rows, out / "lee_radok.csv")
     with threadpool_limits(1):
         _, final = adaptive_levels(workbench.scene("memory_hertz", h_contact=0.01), args.levels, "memory_hertz", rows, 2)
         mesh_figure(final, out / "adaptivity_mesh.png")
@@ -141,8 +170,12 @@ def main():
         if args.three_d:
             sc3 = workbench.scene("memory_hertz3d")
             adaptive_levels(sc3, args.three_d, "memory_hertz3d", rows, 1, effectivity_levels=3)
+    write(rows, out / "adaptivity.csv")
+
+
+def write(rows, path):
     fields = list(dict.fromkeys(k for row in rows for k in row))
-    with open(out / "adaptivity.csv", "w", newline="") as f:
+    with open(path, "w", newline="") as f:
         writer = csv.DictWriter(f, fieldnames=fields)
         writer.writeheader()
         writer.writerows({k: (round(v, 6) if isinstance(v, float) else v) for k, v in row.items()} for row in rows)
