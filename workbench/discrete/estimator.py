@@ -137,19 +137,6 @@ def _volume_element(mesh, facet: int) -> int:
     return shared[0].nr
 
 
-def displacement(body, ds, snapshot: int = -1):
-    """The displacement of a run's snapshot as a GridFunction on the run's mesh (``body.mesh()``: the scene's
-    geometry, or :func:`workbench.input.geometry.of_run` of an adapted run's archive)."""
-    import ngsolve as ngs
-
-    from .discretisation import vector_space
-
-    mesh = body.mesh()
-    u = ngs.GridFunction(vector_space(body, mesh, int(ds.attrs["order"])))
-    u.vec.FV().NumPy()[:] = ds.u_dofs.values[snapshot]
-    return u
-
-
 def energy_error(body, ds, fine_body, fine_ds, tensor, snapshot: int = -1) -> float:
     """||u - u_ref||_C / ||u_ref||_C at a snapshot: the run ``ds`` on ``body`` against a finer run ``fine_ds`` on
     ``fine_body``, on the finer mesh. The coarse field is carried there as the studies carry it

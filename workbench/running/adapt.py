@@ -2,7 +2,8 @@
 
 A quasistatic contact problem with history (memory, bonding, a growing contact zone) is refined here by repeating
 the whole run on each mesh, not by changing the mesh during a run: the estimator
-(:mod:`workbench.discrete.estimator`) is evaluated at every recorded time, each element keeps the largest
+(:mod:`workbench.discrete.estimator`) is evaluated at recorded times at least T/50 apart (and at the snapshots and
+T: ``runner.ESTIMATE_SPACING``), each element keeps the largest
 indicator it had over the run, and the elements that carry the share ``DORFLER`` of the sum of those are bisected
 (Dörfler marking; netgen keeps the curved sides on their geometry). So the final mesh is fine wherever the solution
 needed it at any time (the edge of a contact zone at all its radii), and the run on it is an ordinary run, with no
@@ -53,8 +54,7 @@ def refine(mesh, marked: np.ndarray):
     import ngsolve as ngs
 
     fine = ngs.Mesh(mesh.ngmesh.Copy())
-    for el in fine.Elements(ngs.VOL):
-        fine.SetRefinementFlag(el, bool(marked[el.nr]))
+    fine.SetRefinementFlags([bool(m) for m in marked])  # (element order)
     fine.Refine()
     return fine.ngmesh
 
