@@ -277,6 +277,14 @@ def test_a_kink_is_charged_against_its_share_of_the_tolerance():
     assert steps.per_unit_step(0.02) == pytest.approx(0.02 * 51)
     assert steps.per_unit_step(0.02, crossed=0.1) == pytest.approx(0.2)
     assert steps.per_unit_step(1e-4, crossed=1e-4) == pytest.approx(1e-4 * 51)  # a tiny share: no relief
+    # the predictor of the next `order` steps is drawn through the kink: their estimates are charged to it as well
+    assert steps.judge(0.02, None, crossed=0.1)
+    for _ in range(2):
+        steps.next()
+        assert steps.per_unit_step(0.02) == pytest.approx(0.2)
+        assert steps.judge(0.02, None)
+    steps.next()
+    assert steps.per_unit_step(0.02) > 1.0  # three steps on: per unit elapsed time again
     before = [(np.array([1.0, 1.0, -1.0, 1.0]), np.array([1.0, 1.0, 1.0, 2.0]))]
     after = [(np.array([-1.0, 1.0, -2.0, -1.0]), None)]
     assert crossed_fraction(before, after) == pytest.approx(3 / 5)
