@@ -84,17 +84,44 @@ class Estimator:
         sigma = stresses[0]
         for more in stresses[1:]:  # (Python's sum starts from the number 0, which a matrix CF cannot add)
             sigma = sigma + more
-        self.pressure = ngs.GridFunction(ngs.H1(mesh, order=1))
+        self._region = mesh.Boundaries(d.contact_name)
+        points = self.observer.contact_points()  # (Model B on P2: the facet midpoints carry pressures too)
+        self.pressure = ngs.GridFunction(ngs.H1(mesh, order=2 if "midpoint_x" in points else 1))
+        self._midpoints = self._midpoint_dofs(ngs, points) if "midpoint_x" in points else None
         n = ngs.specialcf.normal(dim)
+        # (the stress from the element the facet bounds: on a boundary element NGSolve differentiates a field along
+        # the boundary only, and sigma nu . nu then missed the normal derivative: a third of the pressure on Hertz)
+        sigma = ngs.BoundaryFromVolumeCF(sigma)
         residual = ngs.InnerProduct(sigma * n, n) + self.pressure
         g = d.geometry
         gap = ((ngs.x, ngs.y, ngs.z)[g.normal_axis] if g.curved else ngs.CF(0.0)) - g.normal_sign * d.u[g.normal_axis]
         # (complementarity: a pressure where the side is open; between the vertices only, at the contact zone's edge)
         open_pressed = ngs.IfPos(self.pressure, self.pressure, 0.0) * ngs.IfPos(gap, gap, 0.0)
         self._contact = ngs.specialcf.mesh_size / self.c_ref * residual * residual + open_pressed
-        self._region = mesh.Boundaries(d.contact_name)
         facets = np.array([el.nr for el in self._region.Elements()], dtype=np.int64)
         self._facet_elements = facets, np.array([_volume_element(mesh, i) for i in facets], dtype=np.int64)
+
+    def _midpoint_dofs(self, ngs, points: dict):
+        """(edge dof, its two vertices, the edge function's value there) of each recorded facet midpoint, in the
+        observer's point order: the P2 pressure whose vertex and midpoint values are the recorded ones (NGSolve's P2
+        edge functions are hierarchical: the midpoint value is the vertices' mean plus the edge dof times its
+        function's value there, read off by the one-point rule, which is the rule the midpoints were taken with)."""
+        d, mesh, fes = self.d, self.d.mesh, self.pressure.space
+        where = np.column_stack([points[f"midpoint_{c}"] for c in "xyz"[: d.dim]])
+        facets = list(self._region.Elements())
+        centres = np.array([np.mean([mesh[v].point for v in el.vertices], axis=0) for el in facets])
+        nearest = np.argmin(((where[:, None, :] - centres[None, :, :]) ** 2).sum(axis=2), axis=1)
+        edges = [facets[j].edges[0].nr for j in nearest]
+        dofs = np.array([fes.GetDofNrs(ngs.NodeId(ngs.EDGE, e))[0] for e in edges], dtype=np.int64)
+        ends = np.array([[v.nr for v in facets[j].vertices] for j in nearest], dtype=np.int64)
+        probe = ngs.GridFunction(fes)
+        probe.vec.FV().NumPy()[dofs] = 1.0
+        mine = np.array([el.nr for el in facets])[nearest]
+
+        def midpoint_rule(cf):
+            return np.asarray(ngs.Integrate(cf, mesh, ngs.BND, order=1, element_wise=True, definedon=self._region))[mine]
+
+        return dofs, ends, midpoint_rule(probe) / midpoint_rule(ngs.CF(1.0))
 
     def evaluate(self, t: float | None = None) -> Estimate:
         """The estimate of the state the scheme holds at time ``t``."""
@@ -116,11 +143,17 @@ class Estimator:
         for (_, g), (_, vector) in zip(self.parts, self.observer.stress_parts()):
             g.vec.FV().NumPy()[:] = vector
         values = self.observer.node_values(t)
-        p = values.get("contact_pressure_recovered", values.get("contact_pressure"))
+        # (P2: the vertices' own pressures, which the midpoints' complete; P1: the recovered one where there is one)
+        p = values.get("contact_pressure") if self._midpoints is not None else \
+            values.get("contact_pressure_recovered", values.get("contact_pressure"))
         nodal = self.pressure.vec.FV().NumPy()
         nodal[:] = 0.0
         if p is not None:
             nodal[d.vertex_numbers] = np.nan_to_num(np.asarray(p, dtype=float))
+        if self._midpoints is not None:
+            dofs, ends, value = self._midpoints
+            mid = np.nan_to_num(np.asarray(self.observer.point_values(t)["contact_pressure_midpoint"], dtype=float))
+            nodal[dofs] = (mid - nodal[ends].mean(axis=1)) / value
         per_facet = np.asarray(ngs.Integrate(self._contact, mesh, ngs.BND, element_wise=True, definedon=self._region))
         facets, elements = self._facet_elements
         out = np.zeros(mesh.ne)
