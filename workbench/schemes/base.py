@@ -93,6 +93,9 @@ class Scheme:
     name = ""
     order = 1
     chatter_watch = False
+    #: Take the steps by the scheme's first-order formula (a multistep scheme: backward Euler) while set; the first
+    #: step's Richardson check sets it for its two halves (:func:`workbench.schemes.stepping._halved`).
+    first_order = False
     #: How many accepted states the history holds (enough for a quadratic predictor).
     keep = 4
     #: The arrays of :meth:`_extra_state` by what they live on, "dof" or "point" (a contact quadrature point's), for a

@@ -44,7 +44,7 @@ class BDF2(ImplicitEuler):
 
     def _steps(self, k):
         """(k', w) of the step about to be taken, or None for the first (backward-Euler) step."""
-        if len(self.history) < 2:
+        if len(self.history) < 2 or self.first_order:
             return None
         k_prev = self.history[-1][0] - self.history[-2][0]
         return k_prev, k / k_prev

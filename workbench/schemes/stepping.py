@@ -515,16 +515,23 @@ def _halved(scheme, before: dict, t_prev: float, t: float, rtol: float, atol: fl
     """The scaled local error of a step that the scheme cannot estimate yet (its first: no history for a predictor),
     by Richardson: the same step again as two halves from the state ``before``. For a step of order p the whole
     step's error is about (whole - halves) 2^p / (2^p - 1); p = 1 (every scheme's first step is backward Euler or
-    as accurate). The scheme is left in the whole step's state. Costs two more solves, for the first step(s) only:
-    without it the first step went unchecked, and a large first step made an error no later step could remove
-    (issue 23: a rod at rtol 1e-5 with k = 0.01 ended 34 x rtol off, all of it from its first step)."""
+    as accurate). Both halves are taken by the first-order formula (``scheme.first_order``), as the whole step is:
+    the estimate is then Richardson's for one formula, and the two halves share one matrix (a multistep second
+    half met a third one, so each try of a first step factored three). The scheme is left in the whole step's
+    state. Costs two more solves, for the first step(s) only: without it the first step went unchecked, and a
+    large first step made an error no later step could remove (issue 23: a rod at rtol 1e-5 with k = 0.01 ended
+    34 x rtol off, all of it from its first step)."""
     whole = scheme.state()
     u, beta = whole["u"], whole["beta"]
     mid = t_prev + 0.5 * (t - t_prev)
     scheme.restore(before)
-    scheme.step(t_prev, mid)
-    scheme.accept(mid)
-    scheme.step(mid, t)
+    scheme.first_order = True
+    try:
+        scheme.step(t_prev, mid)
+        scheme.accept(mid)
+        scheme.step(mid, t)
+    finally:
+        scheme.first_order = False
     err = 2.0 * scheme.scaled_difference(u, beta, rtol, atol)
     scheme.restore(whole)
     return err
