@@ -8,9 +8,10 @@ front, a clamp's corner). This estimator finds them from the discrete solution a
   eta_K^2 = int_K C (eps* - eps_h) : (eps* - eps_h) dx, with C the elastic tensor (Model A's G, Model B's A);
 * **contact** (the residual of the traction balance on the contact side): eta_E^2 = (h_E / C_ref) int_E
   (sigma_h nu . nu + p_h)^2 da on each contact facet E, where sigma_h is the whole stress of the scheme (viscous and
-  memory parts included), p_h the contact pressure the run records (interpolated linearly between the contact
-  vertices; the recovered one where there is one) and C_ref the largest diagonal entry of C's Voigt matrix (the
-  scale that turns a traction into energy). A facet's share joins the element it bounds.
+  memory parts included) taken from the element E bounds, p_h the contact pressure the run records (P1: interpolated
+  linearly between the contact vertices, the recovered one where there is one; Model B on P2: the quadratic through
+  the vertex and facet-midpoint pressures) and C_ref the largest diagonal entry of C's Voigt matrix (the scale that
+  turns a traction into energy). A facet's share joins the element it bounds.
 
 The total is eta = sqrt(sum eta_K^2 + sum eta_E^2); a run reports it relative to the largest energy norm
 ||u_h||_C = (int C eps(u_h) : eps(u_h))^(1/2) over the run (:mod:`workbench.running.adapt`: relative to the norm at the
@@ -90,7 +91,8 @@ class Estimator:
         self._midpoints = self._midpoint_dofs(ngs, points) if "midpoint_x" in points else None
         n = ngs.specialcf.normal(dim)
         # (the stress from the element the facet bounds: on a boundary element NGSolve differentiates a field along
-        # the boundary only, and sigma nu . nu then missed the normal derivative: a third of the pressure on Hertz)
+        # the boundary only, and sigma nu . nu then missed the normal derivative: it carried a third of the pressure
+        # on Hertz, and the residual measured the rest)
         sigma = ngs.BoundaryFromVolumeCF(sigma)
         residual = ngs.InnerProduct(sigma * n, n) + self.pressure
         g = d.geometry
