@@ -60,12 +60,13 @@ def test_effectivity_on_hertz_along_the_adaptive_meshes(order, low):
 
 def test_effectivity_on_a_debonding_slab_model_a():
     """Model A (Kelvin-Voigt, compliance and adhesion, the slab of tp4 pulled off its foundation, backward Euler):
-    effectivity within [0.5, 2] on two structured meshes against a run on 16x the cells."""
+    effectivity within [0.8, 2] on two structured meshes against a run on 16x the cells (measured 1.07, 1.03; 1.12 and
+    1.25 while the contact residual's stress missed its normal derivative)."""
     sc = workbench.scene("tp4", h=0.05, T=0.3, k=0.01, scheme="implicit")
     body = sc.model_of().geometry
     rows = _effectivity(sc, [body, _uniformly_refined(body, 1)], 2)
     for ndof, estimate, error in rows:
-        assert 0.5 <= estimate / error <= 2.0, rows
+        assert 0.8 <= estimate / error <= 2.0, rows
 
 
 def test_space_tol_is_met_and_errors_fall_with_it():
