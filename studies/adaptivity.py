@@ -8,7 +8,7 @@ true error at T in the energy norm against a run on the finest adapted mesh refi
 nested meshes, so the error is integrated exactly), the effectivity index (estimate / true error), the contact
 pressure's L2 error against Hertz (lumped and recovered) and the cumulative cost of the loop. Beside it, the built-in
 refinement (``h_contact`` = 0.01 ... 0.00125) on the same measures of the pressure. The slab of tp4 (Model A,
-debonding, backward Euler) gives the effectivity on structured meshes. With ``--three-d N``, ``memory_hertz3d`` for
+debonding, backward Euler; P1 and P2) gives the effectivity on structured meshes. With ``--three-d N``, ``memory_hertz3d`` for
 N adaptive levels (the pressure's errors and the cost; the effectivity of the first levels against the third level
 refined once). ``--lee-radok`` (alone): the viscoelastic Hertz's contact radius against Lee and Radok's, built-in
 zones against space_tol (``lee_radok.csv``). Writes ``adaptivity.csv``, ``adaptivity_mesh.png`` (the final 2D mesh, whole and at the contact zone)
@@ -160,15 +160,16 @@ def main():
         _, final = adaptive_levels(workbench.scene("memory_hertz", h_contact=0.01), args.levels, "memory_hertz", rows, 2)
         mesh_figure(final, out / "adaptivity_mesh.png")
         built_in("memory_hertz", [0.01, 0.005, 0.0025, 0.00125], rows)
-        slab = workbench.scene("tp4", h=0.05, T=0.3, k=0.01, scheme="implicit")
-        body = slab.model_of().geometry
-        runs = [(b, run_on(slab, b)[0]) for b in (body, refined_uniformly(body, 1))]
-        errors, ref_ndof = effectivity(slab, runs, 2)
-        for (b, ds), error in zip(runs, errors):
-            est = float(ds.space_error_estimate[-1])
-            rows.append(dict(case="tp4 implicit T=0.3", mesh="uniform", ndof=ds.attrs["ndof"], estimate=est,
-                             true_error=error, effectivity=est / error, reference_ndof=ref_ndof))
-            print(rows[-1], flush=True)
+        for order in (1, 2):
+            slab = workbench.scene("tp4", h=0.05, T=0.3, k=0.01, scheme="implicit", order=order)
+            body = slab.model_of().geometry
+            runs = [(b, run_on(slab, b)[0]) for b in (body, refined_uniformly(body, 1))]
+            errors, ref_ndof = effectivity(slab, runs, 2)
+            for (b, ds), error in zip(runs, errors):
+                est = float(ds.space_error_estimate[-1])
+                rows.append(dict(case=f"tp4 implicit T=0.3 P{order}", mesh="uniform", ndof=ds.attrs["ndof"],
+                                 estimate=est, true_error=error, effectivity=est / error, reference_ndof=ref_ndof))
+                print(rows[-1], flush=True)
         if args.three_d:
             sc3 = workbench.scene("memory_hertz3d")
             adaptive_levels(sc3, args.three_d, "memory_hertz3d", rows, 1, effectivity_levels=3)
