@@ -42,8 +42,8 @@ def _effectivity(sc, bodies, reference_refinements: int):
             for b, ds in runs]
 
 
-@pytest.mark.parametrize("order, low", [(1, 0.8), (2, 0.8)])
-def test_effectivity_on_hertz_along_the_adaptive_meshes(order, low):
+@pytest.mark.parametrize("order", [1, 2])
+def test_effectivity_on_hertz_along_the_adaptive_meshes(order):
     """Signorini Hertz (2D): the estimate over the true error (against a run on 16x the cells of the finest mesh)
     stays within [0.8, 2] on three adapted meshes, P1 and P2 (studies/adaptivity.py), and both fall as the mesh is
     refined. (With the stress on the contact facets differentiated along the boundary only, P2's contact residual was
@@ -54,7 +54,7 @@ def test_effectivity_on_hertz_along_the_adaptive_meshes(order, low):
         bodies.append(adapt.refined(bodies[-1], _estimate_only(sc, bodies[-1])))
     rows = _effectivity(sc, bodies, 2)
     for ndof, estimate, error in rows:
-        assert low <= estimate / error <= 2.0, rows
+        assert 0.8 <= estimate / error <= 2.0, rows
     assert rows[-1][1] < 0.75 * rows[0][1] and rows[-1][2] < 0.8 * rows[0][2], rows
 
 
