@@ -69,6 +69,9 @@ _TABLE: dict[str, Param] = {p.name: p for p in [
        "max_dofs; 0: the mesh as given", lower=0.0, upper=0.5),
     _p("max_dofs", 200000, "1", "the most displacement dofs adaptive refinement (space_tol > 0) may reach",
        "int", lower=100),
+    _p("space_adapt", "repeat", "", "how the mesh is adapted (space_tol > 0): 'repeat' = the whole run repeated on "
+       "each finer mesh (one mesh for the whole history), 'during' = refined during the run where the estimate asks, "
+       "the state carried onto the finer mesh (implicit, bdf2, vi)", "choice", choices=("repeat", "during")),
     _p("allow_unstable", False, "", "run the explicit scheme even when k exceeds its predicted stability limit",
        "flag"),
     _p("solver", "auto", "", "linear solver for the constant matrix: banded Cholesky (RCM order), NGSolve's "

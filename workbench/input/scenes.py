@@ -405,6 +405,10 @@ def _check_adaptive(body, v) -> None:
     if body.dim < 2:
         raise ParameterError(f"space_tol = {v['space_tol']:g}: a {body.kind}'s mesh cannot be refined adaptively "
                              "(netgen refines 2D and 3D meshes); refine it by h, or leave space_tol = 0")
+    if v.get("space_adapt") == "during" and v["scheme"] == "explicit":
+        raise ParameterError("space_adapt = 'during' carries the state of the schemes 'implicit', 'bdf2' and 'vi' "
+                             "onto a finer mesh, not the explicit scheme's (its step limit is the mesh's): give "
+                             "scheme = 'implicit' or 'bdf2', or space_adapt = 'repeat'")
     if v["checkpoint_every"]:
         raise ParameterError(f"checkpoint_every = {v['checkpoint_every']} with space_tol = {v['space_tol']:g}: an "
                              "adapted run is repeated on each mesh and cannot be continued from a checkpoint; leave "

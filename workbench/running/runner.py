@@ -26,7 +26,7 @@ from ..output import results
 from ..schemes import scheme_class
 from ..schemes.stepping import AdaptiveSteps, FixedSteps, march, time_grid
 from ..values import closest_name
-from . import adapt, preflight
+from . import adapt, follow, preflight
 from . import restart as restarts
 from .threads import blas_single_threaded, task_manager
 
@@ -102,8 +102,15 @@ def run(scene=None, *, restart=None, checkpoint=None, progress=None, record_time
                  dict(record_times=record_times, times=times, limit=limit, threads=threads))
     job = functools.partial(_Run, sc, numerics=numerics, world=world, call=call, resume=resume, checkpoint=checkpoint,
                             progress=progress)
-    with blas_single_threaded(), _quiet_unless_root(world):  # (space_tol > 0: repeated on adapted meshes)
-        return (adapt.run if numerics.space_tol > 0 else _once)(job, model, numerics, (grid, sync, record_times, limit))
+    with blas_single_threaded(), _quiet_unless_root(world):  # (space_tol > 0: repeated on, or refined to, finer meshes)
+        return _driver(numerics)(job, model, numerics, (grid, sync, record_times, limit))
+
+
+def _driver(numerics):
+    """The run of a model on the mesh as given, or adapted by repeating the run, or during it (``space_adapt``)."""
+    if numerics.space_tol <= 0:
+        return _once
+    return follow.run if numerics.space_adapt == "during" else adapt.run
 
 
 def _once(job, model, numerics, execute_args):
@@ -222,6 +229,13 @@ class _Resume:
     def __init__(self, archive, state, path):
         self.archive, self.state, self.path = archive, state, path
 
+    def state_for(self, disc, scheme) -> dict:
+        """The state to restore in ``scheme`` on ``disc`` (the archive's own)."""
+        return self.state
+
+    def provenance(self, attrs: dict) -> dict:
+        return restarts.provenance(attrs, self.archive, self.path, self.state["time"])
+
 
 def _scene_and_archive(scene, restart, overrides: dict, model):
     """(the scene, the archive to continue or None), checked: a restart may change only T and the output options."""
@@ -272,6 +286,7 @@ class _Run:
         self.failed_checkpoint = None
         self.estimator = self.indicators = None  # (space_tol > 0: the estimate in space, the largest per element)
         self.space_estimate, self.largest_norm = 0.0, 0.0
+        self.follow = None  # (space_adapt = "during": refines the mesh at an estimate time, follow.Follow)
 
     def execute(self, grid, sync, record_times, limit):
         """Set up, step from 0 (or the archive's time) to T, and return the Dataset (None on ranks other than 0);
@@ -300,7 +315,8 @@ class _Run:
 
             self.estimator = Estimator(disc, scheme.observer(disc))
         if self.resume is not None:
-            restarts.restore(self.resume.state, disc, scheme, self.steps, self.recorder, self.resume.archive)
+            restarts.restore(self.resume.state_for(disc, scheme), disc, scheme, self.steps, self.recorder,
+                             self.resume.archive)
         origin = f"limit = {limit:g} m, as given" if limit is not None else \
             "10 x the body's largest extent, the default limit"
         limit = limit if limit is not None else 10.0 * self.model.geometry.size
@@ -341,7 +357,7 @@ class _Run:
         out = results.provenance(self.sc, extra, self.call, self.model.terms)
         if self.resume is None:
             return out
-        return restarts.provenance(out, self.resume.archive, self.resume.path, self.resume.state["time"])
+        return self.resume.provenance(out)
 
     def _observe(self):
         """The loop's output callback: the recorder's, and with space_tol > 0 the estimate in space at the recorded
@@ -362,7 +378,12 @@ class _Run:
                                                                                           e.indicators)
                 self.space_estimate, self.largest_norm = max(self.space_estimate, e.total), max(self.largest_norm, e.norm)
                 control = (control or {}) | {"space_error_estimate": e.total}  # (made relative by adapt.run)
+                if self.follow is not None:
+                    self.follow.consider(e, self.model.geometry, self.disc.mesh,
+                                         float(np.abs(self.disc.u.vec.FV().NumPy()).max()))
             recorder.take(t, wanted, snapshot, control=control)
+            if self.follow is not None and last[0] == t:
+                self._follow(t)
 
         return observe
 
@@ -390,3 +411,15 @@ class _Run:
                                   f"({err.strerror or err}); the run goes on", RuntimeWarning, stacklevel=2)
 
         return after_step
+
+    def _follow(self, t) -> None:
+        """At an estimate time of a run whose mesh follows the solution (:mod:`.follow`): keep the state to go back
+        to, or, when the estimate asked for a finer mesh, stop with the records and the state kept last."""
+        if self.follow.watching:
+            self.follow.kept.append((t, restarts.capture(self.scheme, self.steps, self.recorder)))
+            return
+        if self.follow.geometry is None:
+            self.follow.saved = (t, restarts.capture(self.scheme, self.steps, self.recorder))
+            return
+        ds = self.recorder.dataset(self.attrs("refined", None, *self.clock.elapsed()))
+        raise follow.Refine(self.follow.saved, ds, self.follow.geometry)

@@ -84,6 +84,11 @@ class ContactNodes:
             self.g0 = np.concatenate([self.g0, mid.gap0])
         self.C = np.unique(self.B.indices)  # the dofs the contact points see (for the recovery only)
 
+    def positions(self) -> np.ndarray:
+        """The contact points' coordinates (the vertices, then on P2 the facet midpoints)."""
+        vertices = self.d.node_xyz[self.active_nodes]
+        return vertices if self.midpoints is None else np.vstack([vertices, self.midpoints[:, : vertices.shape[1]]])
+
     def s(self, u: np.ndarray) -> np.ndarray:
         """u_nu at the contact points."""
         return self.sign * u[self.C] if self.B is None else self.B @ u

@@ -1,0 +1,122 @@
+"""The mesh that follows the solution during the run (``space_adapt = "during"``, workbench/running/follow.py): the
+state carried onto a refined mesh is the same field, the run meets its tolerance at every estimate time, and the
+archive on the final mesh holds what every mesh computed."""
+from __future__ import annotations
+
+import dataclasses
+import warnings
+
+import ngsolve as ngs
+import numpy as np
+import pytest
+
+import workbench
+from workbench.discrete import discretisation
+from workbench.discrete.transfer import MeshInfo
+from workbench.errors import ParameterError
+from workbench.input.geometry import of_run, on_mesh
+from workbench.running import adapt, follow
+from workbench.schemes import scheme_class
+
+
+def _refined_half(body):
+    """The body with every other element bisected (a graded, nested refinement)."""
+    mesh = body.mesh()
+    return on_mesh(body, adapt.refine(mesh, np.arange(mesh.ne) % 2 == 0))
+
+
+@pytest.mark.parametrize("name, scheme", [("tp4", "implicit"), ("tp4", "bdf2"), ("memory_slab", "vi")])
+def test_the_carried_state_is_the_same_field_on_the_finer_mesh(name, scheme):
+    """A few steps on the given mesh, the state carried onto a nested finer one: u, v, every displacement the scheme
+    keeps (history, Model B's memory histories) have the same strain energy on both meshes, and the bonding field
+    the same integral over the contact side (to round-off: the coarse fields are fields of the finer spaces)."""
+    sc = workbench.scene(name, h=0.25, k=0.05, scheme=scheme)
+    coarse = discretisation.build(sc)
+    s_c = scheme_class(scheme)(coarse)
+    s_c.start(0.0)
+    s_c.accept(0.0)
+    for n in range(3):
+        s_c.step(0.05 * n, 0.05 * (n + 1))
+        s_c.accept(0.05 * (n + 1))
+    model = dataclasses.replace(sc.model_of(), geometry=_refined_half(sc.model_of().geometry))
+    fine = discretisation.build(model, sc, workbench.input.numerics.from_scene(sc))
+    s_f = scheme_class(scheme)(fine)
+    carried = follow.carry({"scheme": s_c.state(restart=True)}, (coarse, s_c), (fine, s_f))
+    s_f.restore(carried["scheme"])
+    state_c, state_f = s_c.state(), s_f.state()
+    assert fine.ndof > 1.3 * coarse.ndof and carried["ndof"] == fine.ndof
+
+    K_c, K_f = (MeshInfo(d.geometry, 1).strain_matrix() for d in (coarse, fine))
+
+    def energies(state):
+        vectors = [state["u"], state["v"]] + [u for _, u, _ in state["history"]]
+        vectors += list(state["extra"].get("histories", []))
+        return vectors
+
+    pairs = list(zip(energies(state_c), energies(state_f)))
+    assert len(pairs) >= 3 and any(np.any(a) for a, _ in pairs)
+    for a, b in pairs:
+        ea, eb = a @ (K_c @ a), b @ (K_f @ b)
+        assert eb == pytest.approx(ea, rel=1e-10, abs=1e-14 * max(1.0, ea))
+    if state_c["beta"] is not None:
+        assert state_f["beta"] @ fine.facet_measure == pytest.approx(state_c["beta"] @ coarse.facet_measure, rel=1e-12)
+        assert np.ptp(state_c["beta"]) > 0  # (the slab debonds: beta is not uniform)
+
+
+def test_a_run_that_follows_its_solution_meets_the_tolerance_at_every_estimate():
+    """tp4's slab (Model A, backward Euler) refined during the run: the estimate within space_tol at every estimate
+    time, the meshes only finer, the records on the final mesh (NaN at the contact vertices a coarser mesh did not
+    have), the snapshots carried exactly (the field at the probes is the one recorded then), and the result closer
+    to a straight run on the final mesh than the given mesh's run is."""
+    kw = dict(scheme="implicit", T=0.3, h=0.05, snapshots=(0.01, 0.02, 0.3), progress=False)
+    tol = 0.1
+    ds = workbench.run("tp4", space_tol=tol, space_adapt="during", **kw)
+    assert ds.attrs["space_stop"] == "met" and ds.sizes["refinement"] >= 2
+    assert np.nanmax(ds.space_error_estimate.values) <= tol * (1 + 1e-9)
+    assert np.all(np.diff(ds.time.values) > 0) and np.all(np.diff(ds.ndof.values) >= 0)
+    assert int(ds.ndof[-1]) == ds.attrs["ndof"] == ds.sizes["dof"] == int(ds.refinement_ndof[-1])
+    assert int(ds.ndof[0]) < ds.attrs["ndof"]
+    first, last = ds.ndof.values == ds.ndof.values[0], ds.ndof.values == ds.attrs["ndof"]
+    u_contact = ds.u_contact.values
+    assert np.isnan(u_contact[first]).any() and np.isfinite(u_contact[last]).all()
+    # the snapshots: the carried field at the probes is what the run recorded at that time, on whatever mesh
+    body = of_run(workbench.scene("tp4", **{k: v for k, v in kw.items() if k != "progress"}).model_of().geometry, ds)
+    mesh = body.mesh()
+    gf = ngs.GridFunction(ngs.VectorH1(mesh, order=1))
+    at = [int(ds.ndof.values[np.argmin(np.abs(ds.time.values - t))]) for t in ds.snapshot_time.values]
+    assert min(at) < ds.attrs["ndof"] == at[-1]  # (a snapshot made on a coarser mesh)
+    for i, t in enumerate(ds.snapshot_time.values):
+        gf.vec.FV().NumPy()[:] = ds.u_dofs.values[i]
+        j = int(np.argmin(np.abs(ds.time.values - t)))
+        for p in range(ds.sizes["probe"]):
+            x, y = float(ds.probe_x[p]), float(ds.probe_y[p])
+            np.testing.assert_allclose(gf(mesh(x, y)), ds.u_probe.values[j, p], rtol=1e-9, atol=1e-12)
+    model = dataclasses.replace(workbench.scene("tp4", **{k: v for k, v in kw.items() if k != "progress"}).model_of(),
+                                geometry=body)
+    straight = workbench.run("tp4", model=model, **kw)
+    given = workbench.run("tp4", **kw)
+    tip = (ds.u_probe.values[-1], straight.u_probe.values[-1], given.u_probe.values[-1])
+    assert np.abs(tip[0] - tip[1]).max() < 0.5 * np.abs(tip[2] - tip[1]).max()
+
+
+def test_model_b_follows_and_a_met_tolerance_leaves_the_mesh_as_given():
+    """Model B (the Hertz half-disc, Signorini): refined during the run, the tolerance met at every estimate time;
+    with a tolerance the given mesh meets, the run is the plain run on that mesh."""
+    ds = workbench.run("memory_hertz", h_contact=0.01, space_tol=0.05, space_adapt="during", progress=False)
+    assert ds.attrs["space_stop"] == "met" and ds.sizes["refinement"] >= 1
+    assert np.nanmax(ds.space_error_estimate.values) <= 0.05 * (1 + 1e-9)
+    assert ds.attrs["ndof"] > int(ds.ndof[0]) and "adapted_mesh" in ds
+    loose = workbench.run("memory_hertz", h_contact=0.01, space_tol=0.4, space_adapt="during", progress=False)
+    plain = workbench.run("memory_hertz", h_contact=0.01, progress=False)
+    assert loose.sizes["refinement"] == 0 and loose.attrs["ndof"] == plain.attrs["ndof"]
+    np.testing.assert_array_equal(loose.u_probe.values, plain.u_probe.values)
+
+
+def test_space_adapt_refused_where_it_cannot_work():
+    with pytest.raises(ParameterError, match="space_adapt = 'during' carries the state of the schemes"):
+        workbench.scene("tp4", space_tol=0.1, space_adapt="during")
+    with pytest.raises(ParameterError, match="space_adapt"):
+        workbench.scene("tp4", scheme="implicit", space_tol=0.1, space_adapt="sometimes")
+    with warnings.catch_warnings():
+        warnings.simplefilter("error")  # (without space_tol the option changes nothing, and says nothing)
+        workbench.scene("tp4", scheme="implicit", space_adapt="during")
