@@ -1,6 +1,6 @@
 """Adaptive meshes against the built-in contact-zone refinement: the estimator's effectivity and what the dofs buy.
 
-    python studies/adaptivity.py [--levels 7] [--three-d LEVELS] [--lee-radok] [--out data/adaptivity]
+    python studies/adaptivity.py [--levels 7] [--three-d LEVELS] [--lee-radok] [--during] [--out data/adaptivity]
 
 For ``memory_hertz`` (2D Signorini Hertz) it follows the adaptive loop of ``space_tol > 0`` level by level (the same
 meshes: :func:`workbench.running.adapt.refined` of each run) and reports per level the dofs, the estimate at T, the
@@ -11,7 +11,9 @@ refinement (``h_contact`` = 0.01 ... 0.00125) on the same measures of the pressu
 debonding, backward Euler; P1 and P2) gives the effectivity on structured meshes. With ``--three-d N``, ``memory_hertz3d`` for
 N adaptive levels (the pressure's errors and the cost; the effectivity of the first levels against the third level
 refined once). ``--lee-radok`` (alone): the viscoelastic Hertz's contact radius against Lee and Radok's, built-in
-zones against space_tol (``lee_radok.csv``). Writes ``adaptivity.csv``, ``adaptivity_mesh.png`` (the final 2D mesh, whole and at the contact zone)
+zones against space_tol (``lee_radok.csv``). ``--during`` (alone): the mesh refined during the run
+(``space_adapt = "during"``) against the repeated runs on the tp4 slab, the 2D Hertz and Lee and Radok's Hertz, and the
+transfer error of the carried state on the curved half-disc (``during.csv``). Writes ``adaptivity.csv``, ``adaptivity_mesh.png`` (the final 2D mesh, whole and at the contact zone)
 and prints the tables of docs/adaptivity.md. One thread.
 """
 from __future__ import annotations
@@ -27,7 +29,7 @@ from threadpoolctl import threadpool_limits
 
 import workbench
 from workbench.discrete.estimator import energy_error
-from workbench.input.geometry import on_mesh
+from workbench.input.geometry import of_run, on_mesh
 from workbench.references import hertz
 from workbench.running import adapt
 
@@ -109,16 +111,96 @@ def lee_radok(rows):
             warnings.simplefilter("ignore", RuntimeWarning)
             ds = workbench.run("hertz", **base, **kw)
         wall = time.perf_counter() - t0
-        errors = {0.2: 0.0, 0.5: 0.0}
-        for t in ds.time.values[1:]:
-            a = hertz.lee_radok(t, rate=10.0, R=1.0, E=1000.0, nu=0.3, tau=0.2, body="cylinder")
-            off = abs(hertz.profile(ds, t)["a_last"] / a - 1)
-            for start in errors:
-                if t >= start - 1e-12:
-                    errors[start] = max(errors[start], off)
+        errors = radius_errors(ds)
         rows.append(dict(case="hertz Lee-Radok", mesh=label, ndof=ds.attrs["ndof"], cost=round(wall, 2),
                          radius_error_from_0_2=errors[0.2], radius_error_from_0_5=errors[0.5]))
         print(rows[-1], flush=True)
+
+
+def during(rows):
+    """``space_adapt = "during"`` against ``"repeat"`` at the same space_tol: dofs (final, and the mean over the
+    records), cost, the largest relative estimate, and the case's own measure of the error: tp4's energy error at T
+    against a run on 16x the cells of the finest mesh either mode made, the Hertz pressure's L2 error, Lee and Radok's
+    radius."""
+    slab = dict(scheme="implicit", T=0.3, h=0.05, k=0.01)
+    cases = [("tp4", slab, (0.1, 0.07, 0.05)), ("memory_hertz", dict(h_contact=0.01), (0.05, 0.035, 0.025)),
+             ("hertz", dict(c_nu=1e8, tau=0.2, k=0.02, scheme="bdf2", snapshots=()), (0.05, 0.04, 0.03))]
+    for name, kw, tols in cases:
+        runs = []
+        for tol in tols:
+            for mode in ("repeat", "during"):
+                t0 = time.perf_counter()
+                with warnings.catch_warnings():
+                    warnings.simplefilter("ignore", RuntimeWarning)
+                    ds = workbench.run(name, **kw, space_tol=tol, space_adapt=mode, progress=False)
+                row = dict(case=name, mode=mode, space_tol=tol, ndof=ds.attrs["ndof"], mean_ndof=round(float(
+                    ds.ndof.mean())), cost=round(time.perf_counter() - t0, 2),
+                    estimate=round(float(ds.attrs["space_error_estimate"]), 4),
+                    refinements=int(ds.sizes.get("refinement", ds.attrs.get("space_levels", 1) - 1)))
+                if name == "memory_hertz":
+                    row.update(pressure(ds))
+                if name == "hertz":
+                    row.update(radius_error_from_0_2=radius_errors(ds)[0.2])
+                rows.append(row)
+                runs.append(ds)
+                print(row, flush=True)
+        if name == "tp4":
+            sc = workbench.scene(name, **kw)
+            finest = max(runs, key=lambda d: d.attrs["ndof"])
+            ref_body = refined_uniformly(of_run(sc.model_of().geometry, finest), 2)
+            ref, _ = run_on(sc, ref_body, estimate=False)
+            for row, ds in zip(rows[-len(runs):], runs):
+                row["true_error"] = energy_error(of_run(sc.model_of().geometry, ds), ds, ref_body, ref,
+                                                 sc.model_of().elastic) if "adapted_mesh" in ds else float("nan")
+                print(name, row["mode"], row["space_tol"], "true error at T", row["true_error"], flush=True)
+    rows.extend(transfer_errors())
+
+
+def radius_errors(ds):
+    errors = {0.2: 0.0, 0.5: 0.0}
+    for t in ds.time.values[1:]:
+        a = hertz.lee_radok(t, rate=10.0, R=1.0, E=1000.0, nu=0.3, tau=0.2, body="cylinder")
+        off = abs(hertz.profile(ds, t)["a_last"] / a - 1)
+        for start in errors:
+            if t >= start - 1e-12:
+                errors[start] = max(errors[start], off)
+    return errors
+
+
+def transfer_errors():
+    """The carried state's strain energy on the finer mesh against the coarse one's, on the curved half-disc (the new
+    boundary vertices lie on the circle, off the coarse faceted side) and on a box (exact)."""
+    import numpy as np
+
+    from workbench.discrete import discretisation
+    from workbench.discrete.transfer import MeshInfo
+    from workbench.input import numerics as numerics_of
+    from workbench.running import adapt, follow
+    from workbench.schemes import scheme_class
+
+    out = []
+    for name, kw in (("hertz", dict(scheme="bdf2", k=0.1)), ("memory_hertz", dict(k=0.25)),
+                     ("tp4", dict(scheme="implicit", k=0.05))):
+        sc = workbench.scene(name, **kw)
+        coarse = discretisation.build(sc)
+        s_c = scheme_class(sc["scheme"])(coarse)
+        s_c.start(0.0)
+        s_c.accept(0.0)
+        for n in range(2):
+            s_c.step(sc["k"] * n, sc["k"] * (n + 1))
+            s_c.accept(sc["k"] * (n + 1))
+        body = sc.model_of().geometry
+        mesh = body.mesh()
+        finer = on_mesh(body, adapt.refine(mesh, np.ones(mesh.ne, dtype=bool)))
+        fine = discretisation.build(dataclasses.replace(sc.model_of(), geometry=finer), sc, numerics_of.from_scene(sc))
+        s_f = scheme_class(sc["scheme"])(fine)
+        s_f.restore(follow.carry({"scheme": s_c.state(restart=True)}, (coarse, s_c), (fine, s_f))["scheme"])
+        K_c, K_f = (MeshInfo(d.geometry, 1).strain_matrix() for d in (coarse, fine))
+        u_c, u_f = s_c.state()["u"], s_f.state()["u"]
+        e_c, e_f = float(np.sqrt(u_c @ K_c @ u_c)), float(np.sqrt(u_f @ K_f @ u_f))
+        out.append(dict(case=name, mode="transfer", ndof=fine.ndof, transfer_energy_difference=abs(e_f / e_c - 1)))
+        print(out[-1], flush=True)
+    return out
 
 
 def mesh_figure(ds, path):
@@ -147,6 +229,7 @@ def main():
     parser.add_argument("--levels", type=int, default=7)
     parser.add_argument("--three-d", type=int, default=0)
     parser.add_argument("--lee-radok", action="store_true", help="only the growing contact zone (lee_radok.csv)")
+    parser.add_argument("--during", action="store_true", help="only the mesh refined during the run (during.csv)")
     parser.add_argument("--out", default="data/adaptivity")
     args = parser.parse_args()
     out = Path(args.out)
@@ -156,6 +239,10 @@ def main():
         with threadpool_limits(1):
             lee_radok(rows)
         return write(rows, out / "lee_radok.csv")
+    if args.during:
+        with threadpool_limits(1):
+            during(rows)
+        return write(rows, out / "during.csv")
     with threadpool_limits(1):
         _, final = adaptive_levels(workbench.scene("memory_hertz", h_contact=0.01), args.levels, "memory_hertz", rows, 2)
         mesh_figure(final, out / "adaptivity_mesh.png")
