@@ -5,6 +5,7 @@ from __future__ import annotations
 
 import dataclasses
 import warnings
+from pathlib import Path
 
 import ngsolve as ngs
 import numpy as np
@@ -120,3 +121,42 @@ def test_space_adapt_refused_where_it_cannot_work():
     with warnings.catch_warnings():
         warnings.simplefilter("error")  # (without space_tol the option changes nothing, and says nothing)
         workbench.scene("tp4", scheme="implicit", space_adapt="during")
+
+
+def test_a_continuation_from_a_checkpoint_is_the_run_straight_through(tmp_path, monkeypatch):
+    """checkpoint_every with space_adapt = 'during': the checkpoints fall on estimate times that met the tolerance,
+    so a continuation goes back where the run itself would; from the first checkpoint, on a mesh the run refined
+    again afterwards, the continuation reproduces the straight run bitwise (records, meshes, refinements, snapshots)."""
+    from workbench.output import results
+
+    # (the banded factor and the condensed contact solver: NGSolve's sparse factor and the coupled solver's
+    # remembered directions make two straight runs differ by 1e-12 already, tests/test_restart.py)
+    kw = dict(scheme="implicit", T=0.3, h=0.05, space_tol=0.1, space_adapt="during", snapshots=(0.01, 0.3),
+              solver="banded", contact_solver="condensed", progress=False)
+    kept, write = [], results.write
+
+    def keeping(ds, path, *args, **kwargs):
+        out = write(ds, path, *args, **kwargs)
+        copy = tmp_path / f"checkpoint{len(kept)}.nc"
+        copy.write_bytes(Path(path).read_bytes())
+        kept.append((float(ds.time[-1]), int(ds.attrs["ndof"]), copy))
+        return out
+
+    monkeypatch.setattr(results, "write", keeping)
+    straight = workbench.run("tp4", checkpoint_every=2, checkpoint=tmp_path / "run.nc", **kw)
+    monkeypatch.undo()
+    t, ndof, first = kept[0]
+    assert len(kept) >= 3 and ndof < straight.attrs["ndof"] and 0 < t < 0.3
+    more = workbench.run(restart=first, checkpoint=tmp_path / "more.nc", progress=False)
+    assert more.attrs["restart_time"] == t
+    for name in ("time", "ndof", "u_probe", "u_contact", "beta", "space_error_estimate", "refinement_time",
+                 "refinement_ndof", "snapshot_time"):
+        np.testing.assert_array_equal(more[name].values, straight[name].values, err_msg=name)
+    # (a snapshot made before the checkpoint reaches the final mesh through the checkpoint's mesh: the composed
+    # prolongation rounds differently, by an ulp)
+    for name in ("u_dofs", "stress"):
+        np.testing.assert_allclose(more[name].values, straight[name].values, rtol=1e-13, atol=1e-15, err_msg=name)
+    with pytest.raises(ParameterError, match="refined adaptively"):  # (repeated runs cannot be continued)
+        path = tmp_path / "repeat.nc"
+        workbench.write(workbench.run("memory_hertz", h_contact=0.01, space_tol=0.2, T=0.5, progress=False), path)
+        workbench.run(restart=path, T=1.0, progress=False)

@@ -296,11 +296,20 @@ class Recorder:
             self._snapshot_variables(coords, data)
         return xr.Dataset(data, coords=coords, attrs=attrs)
 
-    def _snapshot_variables(self, coords: dict, data: dict) -> None:
+    def snapshot_dataset(self, snaps: list) -> xr.Dataset:
+        """The snapshot section of a Dataset (the fields and the mesh) for ``snaps`` [(t, u dofs, stress, von Mises,
+        edge values or None)] on this recorder's mesh (a run whose mesh followed its solution carries its earlier
+        snapshots onto the last mesh)."""
+        coords, data = {}, {}
+        self._snapshot_variables(coords, data, snaps)
+        return xr.Dataset(data, coords=coords)
+
+    def _snapshot_variables(self, coords: dict, data: dict, snaps: list | None = None) -> None:
         """The whole fields at the snapshot times, on the mesh (UGRID: its topology, and where each field lives)."""
         d = self.disc
         dim = d.dim
-        coords["snapshot_time"] = _var("snapshot", np.array([s[0] for s in self.snaps]), "snapshot_time")
+        snaps = self.snaps if snaps is None else snaps
+        coords["snapshot_time"] = _var("snapshot", np.array([s[0] for s in snaps]), "snapshot_time")
         coords["stress_component"] = _var("stress_component", list(STRESS_COMPONENTS[dim]), "stress_component")
         vxyz = d.vertex_xyz
         for c in range(dim):
@@ -311,14 +320,14 @@ class Recorder:
             data["mesh_volume_shape"] = xr.Variable(("cell",), np.zeros(len(data["cell_vertices"]), np.int8), attrs={
                 "cf_role": "volume_shape_type", "long_name": "the shape of each cell", "flag_values": np.int8(0),
                 "flag_meanings": "tetrahedron"})
-        data["u_dofs"] = _var(("snapshot", "dof"), np.stack([s[1] for s in self.snaps]), "u_dofs")
+        data["u_dofs"] = _var(("snapshot", "dof"), np.stack([s[1] for s in snaps]), "u_dofs")
         vd = d.vertex_dofs
-        data["u_nodes"] = _var(("snapshot", "vertex", "component"), np.stack([s[1][vd] for s in self.snaps]), "u_nodes")
-        data["stress"] = _var(("snapshot", "cell", "stress_component"), np.stack([s[2] for s in self.snaps]), "stress")
-        data["von_mises"] = _var(("snapshot", "cell"), np.stack([s[3] for s in self.snaps]), "von_mises")
-        if self.snaps[0][4] is not None:  # order >= 2: the field at the edge midpoints too
+        data["u_nodes"] = _var(("snapshot", "vertex", "component"), np.stack([s[1][vd] for s in snaps]), "u_nodes")
+        data["stress"] = _var(("snapshot", "cell", "stress_component"), np.stack([s[2] for s in snaps]), "stress")
+        data["von_mises"] = _var(("snapshot", "cell"), np.stack([s[3] for s in snaps]), "von_mises")
+        if snaps[0][4] is not None:  # order >= 2: the field at the edge midpoints too
             data["edge_vertices"] = _var(("edge", "end"), d.fields.edges[0], "edge_vertices")
-            data["u_edges"] = _var(("snapshot", "edge", "component"), np.stack([s[4] for s in self.snaps]), "u_edges")
+            data["u_edges"] = _var(("snapshot", "edge", "component"), np.stack([s[4] for s in snaps]), "u_edges")
         for name, location in (("u_nodes", "node"), ("stress", UGRID_CELLS[dim][2]), ("von_mises", UGRID_CELLS[dim][2])):
             data[name].attrs.update(mesh="mesh", location=location)  # the fields on the mesh say where they live
 

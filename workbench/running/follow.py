@@ -31,13 +31,14 @@ Examples
 from __future__ import annotations
 
 import dataclasses
+import json
 
 import numpy as np
 import xarray as xr
 
 from ..errors import Diverged
 from ..input.geometry import on_mesh
-from ..input.meshes import to_text
+from ..input.meshes import from_text, to_text
 from . import adapt
 
 
@@ -79,6 +80,28 @@ class Follow:
         self._dofs = 0
         self.full = False  # (max_dofs reached: the run goes on on its mesh)
         self.watching, self.seen, self.kept = False, [], []
+        self.segments = []  # (the driver's: the meshes left so far, for the checkpoints)
+        self.checkpoint_step = 0
+        self.earlier_ndof = None  # (a continued run: the mesh of each record before it)
+
+    def record(self) -> dict:
+        """What a continuation needs besides the run's state (the archive's ``space_follow_json``)."""
+        return {"scale": self.scale, "norm": self.norm, "full": self.full, "checkpoint_step": self.checkpoint_step}
+
+    def resume(self, archive: xr.Dataset, state: dict) -> xr.Dataset:
+        """Continue from ``archive`` (a checkpoint of a run that followed its solution, at the estimate time of
+        ``state``): this object's record back, and the archive as its records go on (the estimates absolute again,
+        the meshes of its records kept aside)."""
+        for key, value in json.loads(archive.attrs["space_follow_json"]).items():
+            setattr(self, key, value)
+        if "refinement_time" in archive:
+            self.refinements = list(zip(archive.refinement_time.values.tolist(),
+                                        archive.refinement_ndof.values.tolist()))
+        self.earlier_ndof = archive.ndof.values.copy()
+        self.saved = (state["time"], state)
+        out = archive.drop_vars("ndof")
+        out["space_error_estimate"] = archive.space_error_estimate * max(self.scale, self.norm, 1e-300)
+        return out
 
     def too_large(self, estimate, displacement: float) -> bool:
         """Whether ``estimate`` exceeds the tolerance. Not while the largest ``displacement`` is below ``atol``: a
@@ -97,7 +120,9 @@ class Follow:
 
     def refine(self, indicators, body, mesh) -> None:
         """The finer body (``geometry``) by Dörfler marking of ``indicators``, unless it would exceed max_dofs."""
-        finer = on_mesh(body, adapt.refine(mesh, adapt.mark(indicators)))
+        # (through the archive's text of the mesh, whose coordinates differ by an ulp: a continuation then reads the
+        # very mesh the run went on with, and is bitwise the run straight through)
+        finer = on_mesh(body, from_text(to_text(adapt.refine(mesh, adapt.mark(indicators)))))
         self._dofs = adapt.displacement_dofs(finer.adapted_mesh, finer, self.order)
         if self._dofs > self.max_dofs:
             self.full = True
@@ -125,11 +150,14 @@ class Carried:
         return carry(self.state, self.coarse, (disc, scheme))
 
     def provenance(self, attrs: dict) -> dict:
-        """The costs of all meshes so far (setup, time loop, CPU) summed."""
+        """The costs of all meshes so far (setup, time loop, CPU) summed; where the run was continued from, kept."""
         old, out = self.archive.attrs, dict(attrs)
         for key in ("setup_time", "wall_time", "cpu_time"):
             if key in old and key in out:
                 out[key] = float(old[key]) + float(out[key])
+        for key in ("history", "restarted_from", "restart_time", "restart_time_units"):
+            if key in old:
+                out[key] = old[key]
         return out
 
 
@@ -177,13 +205,17 @@ def _points(coarse, fine):
 
 
 def run(make_job, model, numerics, execute_args: tuple):
-    """One run from 0 to T whose mesh is refined where and when the estimate asks (module docs). Returns the
-    Dataset on the final mesh."""
+    """One run from 0 to T whose mesh is refined where and when the estimate asks (module docs), or the
+    continuation of one from its checkpoint. Returns the Dataset on the final mesh."""
     follow = Follow(numerics.space_tol, numerics.max_dofs, numerics.order, numerics.atol)
-    job, r = _first_pass(make_job, model, follow, execute_args)
-    if not isinstance(r, Refine):  # (met on the given mesh at every estimate time, or max_dofs)
-        return r
-    segments, resume = [], None
+    segments, resume = follow.segments, None
+    job, r = make_job(model), None
+    if job.resume is not None:  # (a continuation: the first pass and the meshes before are in its archive)
+        job.resume.archive = follow.resume(job.resume.archive, job.resume.state)
+    else:
+        job, r = _first_pass(make_job, model, follow, execute_args)
+        if not isinstance(r, Refine):  # (met on the given mesh at every estimate time, or max_dofs)
+            return r
     while True:
         if r is not None:
             # back to the last estimate time that met the tolerance on this mesh; if none did since the run came to
@@ -193,7 +225,7 @@ def run(make_job, model, numerics, execute_args: tuple):
                 resume = Carried(r, job)
             follow.refined(resume.time if resume is not None else 0.0)
             model = dataclasses.replace(model, geometry=r.geometry)
-        job = make_job(model, resume=resume)
+            job = make_job(model, resume=resume)
         job.follow = follow
         try:
             ds = job.execute(*execute_args)
@@ -204,8 +236,7 @@ def run(make_job, model, numerics, execute_args: tuple):
             if err.dataset is not None:
                 err.dataset = merge(segments + [(job.disc, err.dataset, None)], follow, job)
             raise
-        segments.append((job.disc, ds, None))
-        return merge(segments, follow, job)
+        return merge(segments + [(job.disc, ds, None)], follow, job)
 
 
 def _first_pass(make_job, model, follow: Follow, execute_args: tuple):
@@ -233,10 +264,9 @@ def _first_pass(make_job, model, follow: Follow, execute_args: tuple):
 def merge(segments: list, follow: Follow, job) -> xr.Dataset:
     """The records of every mesh (``segments``: (discretisation, Dataset, refinement time)) on the last mesh."""
     final_disc, final, _ = segments[-1]
-    parts = [_onto(disc, ds, final_disc, final) for disc, ds, _ in segments[:-1]] + [(final, final)]
+    parts = [_onto(disc, ds, final_disc, final) for disc, ds, _ in segments[:-1]] + [(final, _snapshots(final))]
     timed = [name for name, v in final.data_vars.items() if "time" in v.dims]
-    shots = [name for name, v in final.data_vars.items() if "snapshot" in v.dims]
-    out = final.drop_vars(timed + shots).drop_dims([d for d in ("time", "snapshot") if d in final.dims])
+    out = final.drop_vars(timed).drop_dims([d for d in ("time", "snapshot") if d in final.dims])
     time = np.concatenate([p.time.values for p, _ in parts])
     out = out.assign_coords(time=("time", time, final.time.attrs),
                             step=("time", np.concatenate([p.step.values for p, _ in parts]), final.step.attrs))
@@ -244,17 +274,18 @@ def merge(segments: list, follow: Follow, job) -> xr.Dataset:
         out[name] = (final[name].dims, np.concatenate([_or_missing(p, name, final) for p, _ in parts]),
                      final[name].attrs)
     ndof = [disc.ndof_global for disc, _, _ in segments]
-    out["ndof"] = ("time", np.repeat(ndof, [p.sizes["time"] for p, _ in parts]).astype(np.int64),
-                   {"units": "1", "long_name": "the displacement dofs of the mesh each record was made on"})
+    per_record = np.repeat(ndof, [p.sizes["time"] for p, _ in parts]).astype(np.int64)
+    if follow.earlier_ndof is not None:  # (a continued run: its archive's records were made on their own meshes)
+        per_record[: len(follow.earlier_ndof)] = follow.earlier_ndof
+    out["ndof"] = ("time", per_record, {"units": "1", "long_name": "the displacement dofs of the mesh each record was "
+                                        "made on"})
     scale = follow.norm if follow.norm > 0 else 1.0
     out["space_error_estimate"] = out.space_error_estimate / scale
     out["space_error_estimate"].attrs.update(final.space_error_estimate.attrs)
-    with_shots = [s for p, s in parts if "snapshot" in s.dims]
-    if with_shots:
-        out = out.assign_coords(snapshot_time=("snapshot", np.concatenate([s.snapshot_time.values for s in with_shots]),
-                                               final.snapshot_time.attrs))
-        for name in shots:
-            out[name] = (final[name].dims, np.concatenate([s[name].values for s in with_shots]), final[name].attrs)
+    snaps = [shot for _, part_shots in parts for shot in part_shots]
+    if snaps:  # (the fields and the final mesh's UGRID, as the recorder writes them)
+        section = job.recorder.snapshot_dataset(snaps)
+        out = out.drop_vars([n for n in section.variables if n in out.variables]).merge(section)
     times, dofs = (list(c) for c in zip(*follow.refinements)) if follow.refinements else ([], [])
     out = out.assign_coords(refinement=("refinement", np.arange(len(times))))
     out["refinement_time"] = ("refinement", np.array(times, dtype=float), {"units": "s", "long_name":
@@ -271,6 +302,7 @@ def merge(segments: list, follow: Follow, job) -> xr.Dataset:
                                {"long_name": "the adapted mesh (netgen .vol text)"})
     largest = float(np.nanmax(out.space_error_estimate.values)) if out.sizes["time"] else float("nan")
     out.attrs.update(space_error_estimate=largest, space_refinements=len(times), ndof=ndof[-1],
+                     space_follow_json=json.dumps(follow.record()),
                      space_stop="max_dofs" if follow.full else ("met" if largest <= follow.tol else "steps"))
     return out
 
@@ -315,19 +347,21 @@ def _onto(disc, ds: xr.Dataset, final_disc, final: xr.Dataset):
                 data = _take(data, where[dim], axis)
         records[name] = (var.dims, data)
     part = xr.Dataset(records, coords={"time": ds.time.values, "step": ("time", ds.step.values)})
-    shots = xr.Dataset()
-    if "snapshot" in ds.dims:
-        u = np.array([move.displacement(v, v.reshape(disc.dim, -1).T if move.P is not None else None)
-                      for v in ds.u_dofs.values])
-        shots = xr.Dataset({"u_dofs": (("snapshot", "dof"), u),
-                            "u_nodes": (("snapshot", "vertex", "component"), u[:, final_disc.vertex_dofs]),
-                            "stress": (("snapshot", "cell", "stress_component"), move.cells(ds.stress.values.swapaxes(
-                                0, 1)).swapaxes(0, 1)),
-                            "von_mises": (("snapshot", "cell"), move.cells(ds.von_mises.values.T).T)},
-                           coords={"snapshot_time": ("snapshot", ds.snapshot_time.values)})
-        if "u_edges" in final:
-            shots["u_edges"] = (("snapshot", "edge", "component"), np.array([_edges(final_disc, v) for v in u]))
+    shots = []
+    for t, u, stress, von_mises, _ in _snapshots(ds):
+        u = move.displacement(u, u.reshape(disc.dim, -1).T if move.P is not None else None)
+        edges = _edges(final_disc, u) if final_disc.numerics.order > 1 else None
+        shots.append((t, u, move.cells(stress), move.cells(von_mises), edges))
     return part, shots
+
+
+def _snapshots(ds: xr.Dataset) -> list:
+    """The snapshots of ``ds`` as the recorder keeps them: [(t, u dofs, stress, von Mises, edge values or None)]."""
+    if "snapshot" not in ds.dims:
+        return []
+    edges = ds.u_edges.values if "u_edges" in ds else [None] * ds.sizes["snapshot"]
+    return [(float(t), u, stress, vm, e) for t, u, stress, vm, e in zip(ds.snapshot_time.values, ds.u_dofs.values,
+                                                                         ds.stress.values, ds.von_mises.values, edges)]
 
 
 def _take(data: np.ndarray, index: np.ndarray, axis: int) -> np.ndarray:

@@ -10,6 +10,7 @@ Examples
 from __future__ import annotations
 
 import contextlib
+import dataclasses
 import functools
 import inspect
 import os
@@ -22,6 +23,7 @@ from .. import parallel
 from ..errors import Diverged, ParameterError
 from ..input import numerics as numerics_of
 from ..input import scenes
+from ..input.geometry import of_run
 from ..output import results
 from ..schemes import scheme_class
 from ..schemes.stepping import AdaptiveSteps, FixedSteps, march, time_grid
@@ -94,7 +96,7 @@ def run(scene=None, *, restart=None, checkpoint=None, progress=None, record_time
     _check_checkpoint(sc, checkpoint)
     numerics = numerics_of.from_scene(sc, threads)
     grid, sync = _grid(sc, numerics, times, record_times, resume)
-    model = model or sc.model_of()
+    model = _on_archived_mesh(model or sc.model_of(), resume)
     world = parallel.world()
     parallel.check(sc, model, numerics)
     preflight.resources(sc, model, len(grid) - 1, processes=world.size)
@@ -111,6 +113,13 @@ def _driver(numerics):
     if numerics.space_tol <= 0:
         return _once
     return follow.run if numerics.space_adapt == "during" else adapt.run
+
+
+def _on_archived_mesh(model, resume):
+    """The model, on the last mesh of the archive it continues when that run adapted its mesh during itself."""
+    if resume is None or "adapted_mesh" not in resume.archive:
+        return model
+    return dataclasses.replace(model, geometry=of_run(model.geometry, resume.archive))
 
 
 def _once(job, model, numerics, execute_args):
@@ -390,7 +399,7 @@ class _Run:
     def _after_step(self):
         """The checkpoint writer the loop calls after each accepted step (None without checkpoints)."""
         every = self.sc["checkpoint_every"]
-        if self.checkpoint is None or every <= 0:
+        if self.checkpoint is None or every <= 0 or self.follow is not None:  # (following: at its estimate times)
             return None
 
         def after_step(t, n):
@@ -401,14 +410,8 @@ class _Run:
             state = restarts.capture(self.scheme, self.steps, self.recorder)  # (every rank; rank 0 writes)
             if not self.world.root:
                 return
-            ds = restarts.attach(self.recorder.dataset(self.attrs("checkpoint", None, *self.clock.elapsed())), state)
-            try:
-                results.write(ds, self.checkpoint)
-            except OSError as err:  # a full disk should not stop a long run: say so once, go on
-                if self.failed_checkpoint is None:
-                    self.failed_checkpoint = err
-                    warnings.warn(f"checkpoint {self.checkpoint} could not be written at t = {t:.6g} s "
-                                  f"({err.strerror or err}); the run goes on", RuntimeWarning, stacklevel=2)
+            self._write(restarts.attach(self.recorder.dataset(self.attrs("checkpoint", None, *self.clock.elapsed())),
+                                        state), t)
 
         return after_step
 
@@ -420,6 +423,30 @@ class _Run:
             return
         if self.follow.geometry is None:
             self.follow.saved = (t, restarts.capture(self.scheme, self.steps, self.recorder))
+            self._checkpoint_following(t)
             return
         ds = self.recorder.dataset(self.attrs("refined", None, *self.clock.elapsed()))
         raise follow.Refine(self.follow.saved, ds, self.follow.geometry)
+
+    def _checkpoint_following(self, t) -> None:
+        """A run that follows its solution writes its checkpoints at the estimate times that met the tolerance, at
+        least ``checkpoint_every`` steps apart: a continuation then goes back to where the run itself would go back
+        to, and equals the run straight through. The archive is on the current mesh, with every mesh's records."""
+        every, n = self.sc["checkpoint_every"], self.steps.taken
+        if self.checkpoint is None or every <= 0 or self.steps.done() or n < self.follow.checkpoint_step + every:
+            return
+        self.follow.checkpoint_step = n
+        ds = self.recorder.dataset(self.attrs("checkpoint", None, *self.clock.elapsed()))
+        ds = restarts.attach(follow.merge(self.follow.segments + [(self.disc, ds, None)], self.follow, self),
+                             self.follow.saved[1])
+        self._write(ds, t)
+
+    def _write(self, ds, t) -> None:
+        """Write the checkpoint ``ds`` (atomically); a full disk should not stop a long run: say so once, go on."""
+        try:
+            results.write(ds, self.checkpoint)
+        except OSError as err:
+            if self.failed_checkpoint is None:
+                self.failed_checkpoint = err
+                warnings.warn(f"checkpoint {self.checkpoint} could not be written at t = {t:.6g} s "
+                              f"({err.strerror or err}); the run goes on", RuntimeWarning, stacklevel=3)
