@@ -1,6 +1,7 @@
 """Adaptive meshes against the built-in contact-zone refinement: the estimator's effectivity and what the dofs buy.
 
-    python studies/adaptivity.py [--levels 7] [--three-d LEVELS] [--lee-radok] [--during] [--out data/adaptivity]
+    python studies/adaptivity.py [--levels 7] [--three-d LEVELS] [--lee-radok] [--during] [--balance]
+                                 [--out data/adaptivity]
 
 For ``memory_hertz`` (2D Signorini Hertz) it follows the adaptive loop of ``space_tol > 0`` level by level (the same
 meshes: :func:`workbench.running.adapt.refined` of each run) and reports per level the dofs, the estimate at T, the
@@ -13,7 +14,9 @@ N adaptive levels (the pressure's errors and the cost; the effectivity of the fi
 refined once). ``--lee-radok`` (alone): the viscoelastic Hertz's contact radius against Lee and Radok's, built-in
 zones against space_tol (``lee_radok.csv``). ``--during`` (alone): the mesh refined during the run
 (``space_adapt = "during"``) against the repeated runs on the tp4 slab, the 2D Hertz and Lee and Radok's Hertz, and the
-transfer error of the carried state on the curved half-disc (``during.csv``). Writes ``adaptivity.csv``, ``adaptivity_mesh.png`` (the final 2D mesh, whole and at the contact zone)
+transfer error of the carried state on the curved half-disc (``during.csv``). ``--balance`` (alone): tp4 with
+error-controlled BDF2 steps and a mesh refined during the run, space_tol against rtol, the energy error at T against
+a finer run in both (``balance.csv``). Writes ``adaptivity.csv``, ``adaptivity_mesh.png`` (the final 2D mesh, whole and at the contact zone)
 and prints the tables of docs/adaptivity.md. One thread.
 """
 from __future__ import annotations
@@ -156,6 +159,31 @@ def during(rows):
     rows.extend(transfer_errors())
 
 
+def balance(rows):
+    """Space against time: tp4 (BDF2 with error control, the mesh refined during the run) for space_tol x rtol, the
+    energy error at T against the finest of those meshes refined once, run at rtol = 1e-5."""
+    base = dict(scheme="bdf2", T=0.3, h=0.05, k=0.01, space_adapt="during")
+    sc = workbench.scene("tp4", **base)
+    runs = []
+    for tol in (0.2, 0.1):
+        for rtol in (1e-2, 1e-3, 1e-4):
+            t0 = time.perf_counter()
+            with warnings.catch_warnings():
+                warnings.simplefilter("ignore", RuntimeWarning)
+                ds = workbench.run(sc, space_tol=tol, rtol=rtol, progress=False)
+            runs.append(ds)
+            rows.append(dict(case="tp4 bdf2", space_tol=tol, rtol=rtol, ndof=ds.attrs["ndof"], steps=ds.attrs["nsteps"],
+                             cost=round(time.perf_counter() - t0, 2), estimate=ds.attrs["space_error_estimate"]))
+            print(rows[-1], flush=True)
+    finest = max(runs, key=lambda d: d.attrs["ndof"])
+    ref_body = refined_uniformly(of_run(sc.model_of().geometry, finest), 1)
+    ref, _ = run_on(workbench.scene("tp4", **{**base, "space_adapt": "repeat"}, rtol=1e-5), ref_body, estimate=False)
+    for row, ds in zip(rows[-len(runs):], runs):
+        row.update(true_error=energy_error(of_run(sc.model_of().geometry, ds), ds, ref_body, ref,
+                                           sc.model_of().elastic), reference_ndof=ref.attrs["ndof"])
+        print(row, flush=True)
+
+
 def radius_errors(ds):
     errors = {0.2: 0.0, 0.5: 0.0}
     for t in ds.time.values[1:]:
@@ -230,6 +258,7 @@ def main():
     parser.add_argument("--three-d", type=int, default=0)
     parser.add_argument("--lee-radok", action="store_true", help="only the growing contact zone (lee_radok.csv)")
     parser.add_argument("--during", action="store_true", help="only the mesh refined during the run (during.csv)")
+    parser.add_argument("--balance", action="store_true", help="only space_tol against rtol (balance.csv)")
     parser.add_argument("--out", default="data/adaptivity")
     args = parser.parse_args()
     out = Path(args.out)
@@ -243,6 +272,10 @@ def main():
         with threadpool_limits(1):
             during(rows)
         return write(rows, out / "during.csv")
+    if args.balance:
+        with threadpool_limits(1):
+            balance(rows)
+        return write(rows, out / "balance.csv")
     with threadpool_limits(1):
         _, final = adaptive_levels(workbench.scene("memory_hertz", h_contact=0.01), args.levels, "memory_hertz", rows, 2)
         mesh_figure(final, out / "adaptivity_mesh.png")
