@@ -113,6 +113,15 @@ def test_model_b_follows_and_a_met_tolerance_leaves_the_mesh_as_given():
     np.testing.assert_array_equal(loose.u_probe.values, plain.u_probe.values)
 
 
+def test_max_dofs_stops_the_refinement_with_a_warning():
+    """A refinement that would exceed max_dofs is not made: the run goes on on its mesh and says so."""
+    with pytest.warns(RuntimeWarning, match=r"space_tol = 0.05 not met: .* \(max_dofs reached\)"):
+        ds = workbench.run("tp4", scheme="implicit", T=0.3, h=0.05, space_tol=0.05, space_adapt="during",
+                           max_dofs=1000, progress=False)
+    assert ds.attrs["space_stop"] == "max_dofs" and ds.attrs["ndof"] <= 1000
+    assert ds.attrs["space_error_estimate"] > 0.05
+
+
 def test_space_adapt_refused_where_it_cannot_work():
     with pytest.raises(ParameterError, match="space_adapt = 'during' carries the state of the schemes"):
         workbench.scene("tp4", space_tol=0.1, space_adapt="during")

@@ -32,6 +32,7 @@ from __future__ import annotations
 
 import dataclasses
 import json
+import warnings
 
 import numpy as np
 import xarray as xr
@@ -236,7 +237,16 @@ def run(make_job, model, numerics, execute_args: tuple):
             if err.dataset is not None:
                 err.dataset = merge(segments + [(job.disc, err.dataset, None)], follow, job)
             raise
-        return merge(segments + [(job.disc, ds, None)], follow, job)
+        return _warned(merge(segments + [(job.disc, ds, None)], follow, job), follow)
+
+
+def _warned(ds: xr.Dataset, follow: Follow, depth: int = 4) -> xr.Dataset:
+    """``ds``, with a warning when max_dofs kept the estimate above the tolerance (``depth``: the caller's frame,
+    counted from here)."""
+    if follow.full:
+        warnings.warn(f"space_tol = {follow.tol:g} not met: the estimate is {ds.attrs['space_error_estimate']:.3g} at "
+                      f"{ds.attrs['ndof']} dofs (max_dofs reached)", RuntimeWarning, stacklevel=depth)
+    return ds
 
 
 def _first_pass(make_job, model, follow: Follow, execute_args: tuple):
@@ -257,7 +267,7 @@ def _first_pass(make_job, model, follow: Follow, execute_args: tuple):
     saved = follow.kept[failed[0] - 1] if failed and failed[0] > 0 else None
     follow.seen, follow.kept = [], []
     if follow.geometry is None:
-        return job, merge([(job.disc, ds, None)], follow, job)
+        return job, _warned(merge([(job.disc, ds, None)], follow, job), follow, depth=5)
     return job, Refine(saved, ds, follow.geometry)
 
 
@@ -303,7 +313,7 @@ def merge(segments: list, follow: Follow, job) -> xr.Dataset:
     largest = float(np.nanmax(out.space_error_estimate.values)) if out.sizes["time"] else float("nan")
     out.attrs.update(space_error_estimate=largest, space_refinements=len(times), ndof=ndof[-1],
                      space_follow_json=json.dumps(follow.record()),
-                     space_stop="max_dofs" if follow.full else ("met" if largest <= follow.tol else "steps"))
+                     space_stop="max_dofs" if follow.full else "met")
     return out
 
 
