@@ -113,6 +113,29 @@ def test_model_b_follows_and_a_met_tolerance_leaves_the_mesh_as_given():
     np.testing.assert_array_equal(loose.u_probe.values, plain.u_probe.values)
 
 
+def test_p2_and_3d_follow_their_solution():
+    """P2 (the edge values of the snapshots carried too, read back at the probes) and the 3D hemisphere (Model B):
+    the tolerance met at every estimate time, a snapshot made on a coarser mesh carried onto the final one."""
+    kw = dict(scheme="implicit", T=0.3, h=0.1, order=2, snapshots=(0.01, 0.05, 0.3))
+    ds = workbench.run("tp4", space_tol=0.05, space_adapt="during", progress=False, **kw)
+    at = [int(ds.ndof.values[np.argmin(np.abs(ds.time.values - t))]) for t in ds.snapshot_time.values]
+    assert min(at) < ds.attrs["ndof"] and ds.u_edges.shape[0] == ds.sizes["snapshot"]
+    mesh = of_run(workbench.scene("tp4", **kw).model_of().geometry, ds).mesh()
+    gf = ngs.GridFunction(ngs.VectorH1(mesh, order=2))
+    for i, t in enumerate(ds.snapshot_time.values):
+        gf.vec.FV().NumPy()[:] = ds.u_dofs.values[i]
+        j = int(np.argmin(np.abs(ds.time.values - t)))
+        for p in range(ds.sizes["probe"]):
+            np.testing.assert_allclose(gf(mesh(float(ds.probe_x[p]), float(ds.probe_y[p]))), ds.u_probe.values[j, p],
+                                       rtol=1e-9, atol=1e-12)
+    three = workbench.run("memory_hertz3d", space_tol=0.15, space_adapt="during", snapshots=(0.25, 1.0),
+                          progress=False)
+    assert three.attrs["space_stop"] == "met" and np.nanmax(three.space_error_estimate.values) <= 0.15 * (1 + 1e-9)
+    first = int(three.ndof.values[np.argmin(np.abs(three.time.values - 0.25))])
+    assert first < three.attrs["ndof"] == three.sizes["dof"]
+    assert np.isfinite(three.u_nodes.values).all() and np.abs(three.u_nodes.values[0]).max() > 0
+
+
 def test_max_dofs_stops_the_refinement_with_a_warning():
     """A refinement that would exceed max_dofs is not made: the run goes on on its mesh and says so."""
     with pytest.warns(RuntimeWarning, match=r"space_tol = 0.05 not met: .* \(max_dofs reached\)"):
