@@ -127,7 +127,8 @@ def during(rows):
     radius."""
     slab = dict(scheme="implicit", T=0.3, h=0.05, k=0.01)
     cases = [("tp4", slab, (0.1, 0.07, 0.05)), ("memory_hertz", dict(h_contact=0.01), (0.05, 0.035, 0.025)),
-             ("hertz", dict(c_nu=1e8, tau=0.2, k=0.02, scheme="bdf2", snapshots=()), (0.05, 0.04, 0.03))]
+             ("hertz", dict(c_nu=1e8, tau=0.2, k=0.02, scheme="bdf2", snapshots=()), (0.05, 0.04, 0.03)),
+             ("memory_hertz3d", {}, (0.15, 0.1))]
     for name, kw, tols in cases:
         runs = []
         for tol in tols:
@@ -140,7 +141,7 @@ def during(rows):
                     ds.ndof.mean())), cost=round(time.perf_counter() - t0, 2),
                     estimate=round(float(ds.attrs["space_error_estimate"]), 4),
                     refinements=int(ds.sizes.get("refinement", ds.attrs.get("space_levels", 1) - 1)))
-                if name == "memory_hertz":
+                if name.startswith("memory_hertz"):
                     row.update(pressure(ds))
                 if name == "hertz":
                     row.update(radius_error_from_0_2=radius_errors(ds)[0.2])
