@@ -136,6 +136,21 @@ def test_p2_and_3d_follow_their_solution():
     assert np.isfinite(three.u_nodes.values).all() and np.abs(three.u_nodes.values[0]).max() > 0
 
 
+def test_a_run_that_diverges_keeps_what_every_mesh_computed():
+    """A bound on the displacement that the run crosses on a refined mesh (measured: at t = 0.07 s, after the
+    refinements): the error carries the records of every mesh up to the last step before, marked incomplete."""
+    kw = dict(scheme="implicit", T=0.3, h=0.05, space_tol=0.1, space_adapt="during", progress=False)
+    with pytest.raises(workbench.Diverged) as caught:
+        workbench.run("tp4", limit=3.0, **kw)
+    ds = caught.value.dataset
+    assert ds.attrs["status"] == "incomplete" and ds.sizes["refinement"] >= 1
+    assert int(ds.ndof[0]) < int(ds.ndof[-1]) and np.all(np.diff(ds.time.values) > 0)
+    assert np.abs(ds.u_probe.values).max() <= 3.0
+    with pytest.raises(workbench.Diverged) as caught:  # (on the given mesh, in the first pass)
+        workbench.run("tp4", limit=0.5, **kw)
+    assert "ndof" in caught.value.dataset and caught.value.dataset.attrs["status"] == "incomplete"
+
+
 def test_max_dofs_stops_the_refinement_with_a_warning():
     """A refinement that would exceed max_dofs is not made: the run goes on on its mesh and says so."""
     with pytest.warns(RuntimeWarning, match=r"space_tol = 0.05 not met: .* \(max_dofs reached\)"):

@@ -258,7 +258,12 @@ def _first_pass(make_job, model, follow: Follow, execute_args: tuple):
     follow.watching = True
     job = make_job(model)
     job.follow = follow
-    ds = job.execute(*execute_args)  # (a divergence on the given mesh is that mesh's result)
+    try:
+        ds = job.execute(*execute_args)
+    except Diverged as err:  # (on the given mesh: that mesh's records, in the archive's layout)
+        if err.dataset is not None:
+            err.dataset = merge([(job.disc, err.dataset, None)], follow, job)
+        raise
     follow.watching, follow.scale = False, follow.norm
     failed = [i for i, (e, displacement, _, _) in enumerate(follow.seen) if follow.too_large(e, displacement)]
     if failed:
