@@ -86,6 +86,7 @@ def test_a_run_that_follows_its_solution_meets_the_tolerance_at_every_estimate()
     gf = ngs.GridFunction(ngs.VectorH1(mesh, order=1))
     at = [int(ds.ndof.values[np.argmin(np.abs(ds.time.values - t))]) for t in ds.snapshot_time.values]
     assert min(at) < ds.attrs["ndof"] == at[-1]  # (a snapshot made on a coarser mesh)
+    assert ds.snapshot_ndof.values.tolist() == at
     for i, t in enumerate(ds.snapshot_time.values):
         gf.vec.FV().NumPy()[:] = ds.u_dofs.values[i]
         j = int(np.argmin(np.abs(ds.time.values - t)))

@@ -301,6 +301,9 @@ def merge(segments: list, follow: Follow, job) -> xr.Dataset:
     if snaps:  # (the fields and the final mesh's UGRID, as the recorder writes them)
         section = job.recorder.snapshot_dataset(snaps)
         out = out.drop_vars([n for n in section.variables if n in out.variables]).merge(section)
+        made = [per_record[int(np.argmin(np.abs(time - t)))] for t, *_ in snaps]
+        out["snapshot_ndof"] = ("snapshot", np.array(made, dtype=np.int64), {"units": "1", "long_name": "the "
+                                "displacement dofs of the mesh each snapshot was made on (carried onto the final mesh)"})
     times, dofs = (list(c) for c in zip(*follow.refinements)) if follow.refinements else ([], [])
     out = out.assign_coords(refinement=("refinement", np.arange(len(times))))
     out["refinement_time"] = ("refinement", np.array(times, dtype=float), {"units": "s", "long_name":
