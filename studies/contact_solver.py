@@ -1,14 +1,16 @@
 """The contact solvers side by side: condensed (dense contact stiffness) against coupled (whole body, S never
 formed), on the same meshes, in one process, one thread each.
 
-    python studies/contact_solver.py [--out data/contact_solver] [--big]
+    python studies/contact_solver.py [--out data/contact_solver] [--big] [--slope]
 
 Per case and solver: dofs, contact points, steps, wall time of ``workbench.run`` (the mesh made once beforehand, so
 both pay the same), the setup time, back-substitutions (``linear_solves``), active-set and conjugate gradient
 iterations (Model A: Newton iterations; its back-substitutions are not counted: -1), and the largest difference between the two solvers' contact displacements (relative). Beside them the
 cost of assembling and factoring K alone (NGSolve's sparse Cholesky, the yardstick of issue 22). ``--big`` adds the
 hemisphere at h_contact = 0.005 (47k dofs, 5186 contact vertices), coupled only (condensed: 783 s, measured before,
-``data/hertz/hertz3d_fine.csv``). Writes ``summary.csv`` and prints the table of docs/schemes.md.
+``data/hertz/hertz3d_fine.csv``). Writes ``summary.csv`` and prints the table of docs/schemes.md. ``--slope`` (alone):
+the cost of a step of the coupled solver against the dofs at three sizes of the block and of the hemisphere, the time
+loop's wall time over its steps, and the least-squares slope in log-log (``slope.csv``).
 """
 from __future__ import annotations
 
@@ -65,6 +67,28 @@ def one(name, overrides, solver):
     return row, ds
 
 
+SLOPE = [("memory_block", [dict(h=0.1), dict(h=0.07), dict(h=0.05)]),
+         ("memory_hertz3d", [dict(h_contact=0.02), dict(h_contact=0.01), dict(h_contact=0.005)])]
+
+
+def slope(rows) -> None:
+    """The time loop's cost per step (coupled solver, one thread) against the dofs, and its log-log slope."""
+    for name, sizes in SLOPE:
+        mine = []
+        for overrides in sizes:
+            row, ds = one(name, overrides, "coupled")
+            row.update(loop=round(float(ds.attrs["wall_time"]), 3),
+                       per_step=round(float(ds.attrs["wall_time"]) / row["steps"], 4),
+                       backsubs_per_step=round(row["backsubs"] / row["steps"], 1))
+            mine.append(row)
+            print(row, flush=True)
+        fit = np.polyfit(np.log([r["ndof"] for r in mine]), np.log([r["per_step"] for r in mine]), 1)[0]
+        for r in mine:
+            r["slope"] = round(float(fit), 3)
+        rows.extend(mine)
+        print(name, "slope of the cost of a step against the dofs", round(float(fit), 3), flush=True)
+
+
 def table(rows) -> str:
     """The markdown table of docs/schemes.md from the rows of one run."""
     by = {}
@@ -86,10 +110,20 @@ def main():
     p = argparse.ArgumentParser(description=__doc__.splitlines()[0])
     p.add_argument("--out", default="data/contact_solver")
     p.add_argument("--big", action="store_true")
+    p.add_argument("--slope", action="store_true", help="only the cost of a step against the dofs (slope.csv)")
     args = p.parse_args()
     out = Path(args.out)
     out.mkdir(parents=True, exist_ok=True)
     rows = []
+    if args.slope:
+        with threadpool_limits(1):
+            workbench.run("memory_slab", h=0.5, k=0.5, progress=False)  # (warm-up)
+            slope(rows)
+        with open(out / "slope.csv", "w", newline="") as f:
+            w = csv.DictWriter(f, fieldnames=list(rows[-1]))
+            w.writeheader()
+            w.writerows(rows)
+        return
     with threadpool_limits(1):
         workbench.run("memory_slab", h=0.5, k=0.5, progress=False)  # warm-up: imports and first calls out of the timings
         for name, overrides in CASES + (BIG if args.big else []):
