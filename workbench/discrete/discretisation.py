@@ -120,6 +120,16 @@ class Discretisation:
         method = solvers.choose(self.numerics.solver, self.dim, self.ndof, iterative=iterative)
         return solvers.factor(self.viscous.mat, self.fes.FreeDofs(), self.u.vec, method, fes=self.fes)
 
+    def step_solver(self) -> str:
+        """The linear solver of the implicit schemes' step operators: the scene's ``solver``, with ``auto`` resolved
+        to ``cg`` in 3D where the sparse factor would exceed :data:`workbench.discrete.solvers.FACTOR_BYTES` and the
+        contact is solved on the whole body (:func:`workbench.input.numerics.may_iterate`)."""
+        from ..input.numerics import may_iterate
+        from . import solvers
+
+        n = self.numerics
+        return solvers.choose(n.solver, self.dim, self.ndof, iterative=may_iterate(n.scheme, n.contact_solver))
+
     def springs(self, solver):
         """The operators of the body on boundary springs with K_A solved by ``solver``: the explicit scheme's step
         limit (:class:`workbench.discrete.eigen.SpringOperators`)."""

@@ -31,7 +31,7 @@ class Registered(NamedTuple):
     #: Whether it takes error-controlled steps (``rtol > 0``): it estimates its local error.
     error_control: bool = True
     #: Whether its systems may be solved iteratively (``solver = 'cg'``): one constant matrix, no condensation (the
-    #: schemes with ``coupled`` may too, with their contact solved on the whole body; ``auto`` picks cg only here).
+    #: schemes with ``coupled`` may too, with their contact solved on the whole body: :func:`may_iterate`).
     iterative: bool = False
     #: Whether it runs on a body distributed over several MPI processes.
     distributed: bool = False
@@ -81,6 +81,18 @@ AXES = ("h", "k", "order", "scheme")
 COUPLED_PER_STEP, COUPLED_FROM = 20, 5000
 
 
+def may_iterate(scheme: str, contact_solver: str) -> bool:
+    """Whether the systems of ``scheme`` may be solved without a factor (``solver = 'cg'``): the explicit scheme's,
+    and the implicit ones' with their contact solved on the whole body (not ``contact_solver = 'condensed'``, whose
+    dense contact stiffness takes one solve per contact point).
+
+    >>> may_iterate("explicit", "auto"), may_iterate("bdf2", "auto"), may_iterate("bdf2", "condensed")
+    (True, True, False)
+    """
+    entry = SCHEMES[scheme]
+    return entry.iterative or (entry.coupled and contact_solver != "condensed")
+
+
 def schemes_of(model: str) -> tuple:
     """The scheme names a model (``"A"`` or ``"B"``) can run."""
     return tuple(name for name, entry in SCHEMES.items() if entry.model == model)
@@ -124,16 +136,16 @@ class Numerics:
         """Whether the steps are error-controlled."""
         return is_adaptive(self.rtol)
 
-    def coupled_contact(self, unknowns: int) -> bool:
+    def coupled_contact(self, unknowns: int, solver: str | None = None) -> bool:
         """Whether a contact problem of ``unknowns`` contact unknowns is solved on the whole body (``contact_solver``;
-        ``auto``: :data:`COUPLED_PER_STEP`).
+        ``auto``: :data:`COUPLED_PER_STEP`); ``solver``: the linear solver taken, when ``auto`` resolved it.
 
         >>> Numerics("vi", k=0.25, T=1.0).coupled_contact(203), Numerics("vi", k=0.02, T=1.0).coupled_contact(440)
         (True, False)
         """
         if self.contact_solver != "auto":
             return self.contact_solver == "coupled"
-        if self.solver == "cg":
+        if (solver or self.solver) == "cg":
             return True  # (an iterative solver has no factor to repeat the condensed solver's per-point solves with)
         return unknowns >= min(COUPLED_PER_STEP * max(1.0, self.T / self.k), COUPLED_FROM)
 

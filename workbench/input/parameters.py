@@ -76,8 +76,9 @@ _TABLE: dict[str, Param] = {p.name: p for p in [
        "flag"),
     _p("solver", "auto", "", "linear solver for the constant matrix: banded Cholesky (RCM order), NGSolve's "
        "sparsecholesky or umfpack, or cg (AMG-preconditioned conjugate gradients, no factor: the explicit scheme, and "
-       "the implicit ones with the coupled contact solver); auto = banded when the bandwidth is small, cg for the "
-       "explicit scheme in 3D when a sparse factor would exceed 2 GB",
+       "the implicit ones with the coupled contact solver); auto = banded when the bandwidth is small, cg in 3D when "
+       "a sparse factor would exceed 2 GB (the explicit scheme, and the implicit ones unless contact_solver = "
+       "condensed)",
        "choice", choices=("auto", "banded", "sparsecholesky", "umfpack", "cg")),
     _p("contact_solver", "auto", "", "how an implicit step's contact problem is solved: condensed (the dense contact "
        "stiffness, one solve per contact point: fast for a few hundred points) or coupled (on the whole body, "

@@ -20,7 +20,7 @@ import math
 from dataclasses import dataclass
 
 from ..errors import ParameterError
-from ..input.numerics import SCHEMES
+from ..input.numerics import may_iterate
 
 
 @dataclass(frozen=True)
@@ -70,7 +70,7 @@ def resources(scene, model, n_steps: int, processes: int = 1) -> None:
     ``processes`` each holds its part: the estimate of the whole does not apply)."""
     if processes > 1:
         return
-    iterative = SCHEMES[scene["scheme"]].iterative
+    iterative = may_iterate(scene["scheme"], scene["contact_solver"])
     est = estimate(model.geometry, scene["order"], scene["solver"], iterative)
     free = available_memory()
     if est.bytes > 0.9 * free:

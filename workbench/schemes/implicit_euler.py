@@ -77,7 +77,8 @@ class ImplicitEuler(ErrorControlled, KelvinVoigtScheme):
         self.u_prev = np.zeros(d.ndof)
         self.lift = d.u.vec.CreateVector()
         self.op = ContactOperator(d) if d.side is not None else None
-        self.coupled = self.op is not None and d.numerics.coupled_contact(self.op.size)
+        self.method = d.step_solver()
+        self.coupled = self.op is not None and d.numerics.coupled_contact(self.op.size, self.method)
         self.bonding = d.model.bonding
         self._factors = OrderedDict()
         self.newton = None  # (the step's, from _prepare)
@@ -119,7 +120,7 @@ class ImplicitEuler(ErrorControlled, KelvinVoigtScheme):
             built_from = a0 if entry is None else entry
             M = d.viscous.mat.CreateMatrix()
             M.AsVector().data = built_from * d.viscous.mat.AsVector() + d.elastic.mat.AsVector()
-            solver = solvers.factor(M, d.fes.FreeDofs(), d.u.vec, d.scene["solver"], fes=d.fes)
+            solver = solvers.factor(M, d.fes.FreeDofs(), d.u.vec, self.method, fes=d.fes)
             newton = None
             if self.op is not None and self.op.size and self.coupled:
                 newton = CoupledNewton(SchurOperator(solver, d.ndof, self.op.C), self.op)

@@ -75,7 +75,9 @@ class MemoryVI(ErrorControlled, Scheme):
         self.trapezoid = d.numerics.memory_rule == "trapezoid"
         self.order = 2 if self.trapezoid else 1
         self.nodes = ContactNodes(d)
-        self.coupled = CoupledActiveSet(self.nodes) if d.numerics.coupled_contact(self.nodes.size) else None
+        self.method = d.step_solver()
+        self.coupled = CoupledActiveSet(self.nodes) if d.numerics.coupled_contact(self.nodes.size, self.method) \
+            else None
         self.memory = rule_for(d, self.trapezoid)  # (None without memory)
         self.pinned = d.pinned_nodes
         self._balance = None  # f - memory of the last equilibrium (only for the reaction of pinned contact nodes)
@@ -111,7 +113,7 @@ class MemoryVI(ErrorControlled, Scheme):
                 vec.data = d.elastic.mat.AsVector()
                 for wi, si, (K, _, _) in zip(weights, self.memory.scales, d.memory):
                     vec.data += (wi * si) * K.mat.AsVector()
-            solver = solvers.factor(M, d.fes.FreeDofs(), d.u.vec, d.numerics.solver, fes=d.fes)
+            solver = solvers.factor(M, d.fes.FreeDofs(), d.u.vec, self.method, fes=d.fes)
             nodes = self.nodes
             schur = SchurOperator(solver, d.ndof, nodes.C, nodes.sign, matrix_diagonal(M), nodes.B) \
                 if self.coupled is not None else None
