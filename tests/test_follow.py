@@ -77,6 +77,7 @@ def test_a_run_that_follows_its_solution_meets_the_tolerance_at_every_estimate()
     assert np.all(np.diff(ds.time.values) > 0) and np.all(np.diff(ds.ndof.values) >= 0)
     assert int(ds.ndof[-1]) == ds.attrs["ndof"] == ds.sizes["dof"] == int(ds.refinement_ndof[-1])
     assert int(ds.ndof[0]) < ds.attrs["ndof"]
+    assert 0.01 < ds.attrs["h_max"] <= 0.05 + 1e-12  # (the longest cell side, not the side over the cell count)
     first, last = ds.ndof.values == ds.ndof.values[0], ds.ndof.values == ds.attrs["ndof"]
     u_contact = ds.u_contact.values
     assert np.isnan(u_contact[first]).any() and np.isfinite(u_contact[last]).all()

@@ -660,6 +660,20 @@ class _OnMesh:
         m = self.adapted_mesh
         return len(m.Elements2D() if self.dim == 2 else m.Elements3D())
 
+    def h_max(self):
+        """The longest cell side along the axes, as for the body's own mesh: the largest coordinate difference
+        along a cell edge (the cells the refinement left are as long as the given mesh's; counting the cells along
+        a side, as a box does, would give the refined mesh's mean)."""
+        import itertools
+
+        import numpy as np
+
+        m = self.adapted_mesh
+        cells = (m.Elements2D() if self.dim == 2 else m.Elements3D()).NumPy()["nodes"][:, : self.dim + 1] - 1
+        xyz = np.asarray(m.Coordinates(), dtype=float)[:, : self.dim]
+        return float(max(np.abs(xyz[cells[:, i]] - xyz[cells[:, j]]).max()
+                         for i, j in itertools.combinations(range(self.dim + 1), 2)))
+
     def cells(self):
         return (self.n_cells(),)
 
