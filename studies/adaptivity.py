@@ -31,6 +31,7 @@ from pathlib import Path
 from threadpoolctl import threadpool_limits
 
 import workbench
+from workbench import plotting
 from workbench.discrete.estimator import energy_error
 from workbench.input.geometry import of_run, on_mesh
 from workbench.references import hertz
@@ -120,7 +121,7 @@ def lee_radok(rows):
         print(rows[-1], flush=True)
 
 
-def during(rows):
+def during(rows, out):
     """``space_adapt = "during"`` against ``"repeat"`` at the same space_tol: dofs (final, and the mean over the
     records), cost, the largest relative estimate, and the case's own measure of the error: tp4's energy error at T
     against a run on 16x the cells of the finest mesh either mode made, the Hertz pressure's L2 error, Lee and Radok's
@@ -145,6 +146,8 @@ def during(rows):
                     row.update(pressure(ds))
                 if name == "hertz":
                     row.update(radius_error_from_0_2=radius_errors(ds)[0.2])
+                    if mode == "during" and tol == tols[0]:  # (the estimate and the dofs over the run)
+                        plotting.space(ds, out / "space_during_lee_radok.png")
                 rows.append(row)
                 runs.append(ds)
                 print(row, flush=True)
@@ -271,7 +274,7 @@ def main():
         return write(rows, out / "lee_radok.csv")
     if args.during:
         with threadpool_limits(1):
-            during(rows)
+            during(rows, out)
         return write(rows, out / "during.csv")
     if args.balance:
         with threadpool_limits(1):

@@ -162,6 +162,25 @@ def test_max_dofs_stops_the_refinement_with_a_warning():
     assert ds.attrs["space_error_estimate"] > 0.05
 
 
+def test_the_space_plot_draws_both_modes(tmp_path):
+    """plotting.space: the estimate over time and, for 'during', the dofs over time; for 'repeat', the loop's meshes;
+    a run without space_tol is refused by name."""
+    from workbench import plotting
+
+    during = workbench.run("memory_hertz", h_contact=0.01, space_tol=0.05, space_adapt="during", progress=False)
+    fig = plotting.space(during, tmp_path / "during.png")
+    assert (tmp_path / "during.png").stat().st_size > 0
+    assert [ax.get_title() for ax in fig.axes] == ["estimate in space", "dofs over time"]
+    steps = fig.axes[1].lines[0].get_ydata()
+    assert steps[0] < steps[-1] == during.attrs["ndof"]
+    with warnings.catch_warnings():
+        warnings.simplefilter("ignore", RuntimeWarning)
+        repeat = workbench.run("memory_hertz", h_contact=0.01, space_tol=0.05, progress=False)
+    assert [ax.get_title() for ax in plotting.space(repeat).axes] == ["estimate in space", "meshes of the loop"]
+    with pytest.raises(ValueError, match="space_tol > 0"):
+        plotting.space(workbench.run("memory_hertz", h_contact=0.01, progress=False))
+
+
 def test_space_adapt_refused_where_it_cannot_work():
     with pytest.raises(ParameterError, match="space_adapt = 'during' carries the state of the schemes"):
         workbench.scene("tp4", space_tol=0.1, space_adapt="during")

@@ -284,3 +284,38 @@ def pareto(study_ds, path=None, error="error", cost="wall_time"):
     ax.legend(fontsize=7, loc="lower left", bbox_to_anchor=(1.02, 0.0))  # beside the data, below the numbers
     ax.text(1.02, 1.0, "\n".join(lines), transform=ax.transAxes, va="top", fontsize=7, family="monospace")
     return _save(fig, path)
+
+
+def space(ds, path=None):
+    """An adapted run (``space_tol > 0``): the relative estimate in space at the estimate times against the tolerance,
+    and how the mesh grew: the dofs over time with the refinements marked (``space_adapt = "during"``), or the estimate
+    against the dofs of each mesh of the repeated loop (``"repeat"``).
+
+    >>> import workbench
+    >>> ds = workbench.run("tp4", scheme="implicit", T=0.1, h=0.05, space_tol=0.1, space_adapt="during", progress=False)
+    >>> fig = space(ds)
+    >>> [ax.get_title() for ax in fig.axes]
+    ['estimate in space', 'dofs over time']
+    """
+    if "space_error_estimate" not in ds:
+        raise ValueError("space plots need a run with space_tol > 0 (its space_error_estimate)")
+    tol = float(ds.attrs.get("space_tol", np.nan))
+    fig, (left, right) = figure(1, 2, figsize=(9, 3.6))
+    t, e = ds.time.values, ds.space_error_estimate.values
+    known = np.isfinite(e)
+    left.plot(t[known], e[known], "o-", ms=3)
+    left.axhline(tol, color="gray", ls=":", lw=1, label=f"space_tol = {tol:g}")
+    left.set(xlabel="t [s]", ylabel="estimate / largest energy norm [1]", title="estimate in space")
+    left.legend(fontsize=7)
+    if "refinement" in ds.dims:
+        right.step(t, ds.ndof.values, where="post")
+        for time in ds.refinement_time.values:
+            right.axvline(time, color="gray", ls=":", lw=0.8)
+        right.set(xlabel="t [s]", ylabel="displacement dofs", title="dofs over time")
+    else:
+        right.loglog(ds.level_ndof.values, ds.level_space_error_estimate.values, "o-")
+        right.axhline(tol, color="gray", ls=":", lw=1)
+        right.set(xlabel="displacement dofs", ylabel="largest estimate over the run [1]", title="meshes of the loop")
+    fig.suptitle(f"{plain(ds.attrs.get('scene'))}: {ds.attrs.get('space_stop', '')} at {ds.attrs.get('ndof')} dofs",
+                 fontsize=9)
+    return _save(fig, path)
