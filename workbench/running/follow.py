@@ -1,13 +1,16 @@
 """The mesh follows the solution during the run (``space_tol > 0``, ``space_adapt = "during"``).
 
 Where :mod:`workbench.running.adapt` repeats the whole run on each finer mesh, here one run goes from 0 to T and
-refines its mesh on the way. At the estimate times (recorded times at least ``runner.ESTIMATE_SPACING`` T apart,
-the snapshots; not T), when the estimate exceeds ``space_tol`` times the largest energy norm so far, the elements
-that carry half of the squared indicators of that moment are bisected (Dörfler marking, as the repeated loop), and
-the run goes on from that time on the finer mesh with its whole state carried over (:func:`carry`): the
+refines its mesh on the way. A first pass over the whole run on the given mesh sets the scale (its largest energy
+norm), so that ``space_tol`` means what it means for the repeated loop. Then at every estimate time (recorded times
+at least ``runner.ESTIMATE_SPACING`` T apart, the snapshots and T) whose estimate exceeds ``space_tol`` times that
+scale (or the largest norm so far, if larger), the run goes back to the last estimate time that met the tolerance,
+bisects the elements that carry half of the squared indicators of the failing time (Dörfler marking, as the
+repeated loop) and goes on from there on the finer mesh with its whole state carried over (:func:`carry`): the
 displacement, velocity and the accepted states a multistep formula or a predictor keeps, Model B's memory
 histories and stored steps (dof vectors of the displacement's space), the bonding field on the contact facets, the
-contact points' states and forces (a warm start only), the step controller and the record schedule.
+contact points' states and forces (a warm start only), the step controller and the record schedule. Checkpoints
+(``checkpoint_every``) fall on the estimate times that met the tolerance, so a continuation goes on as the run did.
 
 **The transfer is exact.** netgen's bisection nests the meshes, so every coarse P1 or P2 field is a field of the
 finer space, and the prolongation (``discrete/transfer.py``) reproduces it; a facet's bonding field passes to both
@@ -69,8 +72,8 @@ class Follow:
     """What a run that adapts during itself decides at its estimate times: refine now (``geometry``, the finer body)
     or not. ``norm`` is the largest energy norm so far, carried from mesh to mesh; the estimate is judged against
     the larger of it and ``scale``, the largest norm of the first pass over the whole run on the given mesh. While
-    ``watching`` (that first pass) nothing is refined: the states and estimates of the estimate times are kept up to
-    the first that fails (``kept``)."""
+    ``watching`` (that first pass) nothing is refined: the estimates and the states of every estimate time are kept
+    (``seen``, ``kept``) until the scale is known."""
 
     def __init__(self, tol: float, max_dofs: int, order: int, atol: float):
         self.tol, self.max_dofs, self.order, self.atol = tol, max_dofs, order, atol
