@@ -10,6 +10,7 @@ from pathlib import Path
 import ngsolve as ngs
 import numpy as np
 import pytest
+from scipy.spatial import cKDTree
 
 import workbench
 from workbench.discrete import discretisation
@@ -88,6 +89,16 @@ def test_a_run_that_follows_its_solution_meets_the_tolerance_at_every_estimate()
     at = [int(ds.ndof.values[np.argmin(np.abs(ds.time.values - t))]) for t in ds.snapshot_time.values]
     assert min(at) < ds.attrs["ndof"] == at[-1]  # (a snapshot made on a coarser mesh)
     assert ds.snapshot_ndof.values.tolist() == at
+    # the mesh each snapshot was made on, by UGRID: nested in the final mesh, with the dofs of its records
+    final = np.column_stack([ds.vertex_x.values, ds.vertex_y.values])
+    for name, ndof in zip(ds.snapshot_mesh.values, at):
+        pre = "" if name == "mesh" else f"{name}_"
+        assert ds[name].attrs["node_coordinates"] == f"{pre}vertex_x {pre}vertex_y"
+        xy = np.column_stack([ds[f"{pre}vertex_x"].values, ds[f"{pre}vertex_y"].values])
+        cells = ds[ds[name].attrs["face_node_connectivity"]].values
+        assert 2 * len(xy) == ndof and cells.max() == len(xy) - 1 and set(np.unique(cells)) == set(range(len(xy)))
+        assert cKDTree(final).query(xy)[0].max() < 1e-12
+    assert ds.snapshot_mesh.values[0] != "mesh" and ds.snapshot_mesh.values[-1] == "mesh"
     for i, t in enumerate(ds.snapshot_time.values):
         gf.vec.FV().NumPy()[:] = ds.u_dofs.values[i]
         j = int(np.argmin(np.abs(ds.time.values - t)))
@@ -224,6 +235,11 @@ def test_a_continuation_from_a_checkpoint_is_the_run_straight_through(tmp_path, 
     # prolongation rounds differently, by an ulp)
     for name in ("u_dofs", "stress"):
         np.testing.assert_allclose(more[name].values, straight[name].values, rtol=1e-13, atol=1e-15, err_msg=name)
+    # (the meshes of the snapshots made before the checkpoint, kept from its archive)
+    np.testing.assert_array_equal(more.snapshot_mesh.values, straight.snapshot_mesh.values)
+    assert more.snapshot_mesh.values[0] != "mesh"
+    for name in [n for n in straight.variables if n.startswith("mesh_")]:
+        np.testing.assert_array_equal(more[name].values, straight[name].values, err_msg=name)
     with pytest.raises(ParameterError, match="refined adaptively"):  # (repeated runs cannot be continued)
         path = tmp_path / "repeat.nc"
         workbench.write(workbench.run("memory_hertz", h_contact=0.01, space_tol=0.2, T=0.5, progress=False), path)

@@ -311,15 +311,8 @@ class Recorder:
         snaps = self.snaps if snaps is None else snaps
         coords["snapshot_time"] = _var("snapshot", np.array([s[0] for s in snaps]), "snapshot_time")
         coords["stress_component"] = _var("stress_component", list(STRESS_COMPONENTS[dim]), "stress_component")
-        vxyz = d.vertex_xyz
-        for c in range(dim):
-            coords[f"vertex_{COMPONENTS[c]}"] = _var("vertex", vxyz[:, c], f"vertex_{COMPONENTS[c]}")
-        data["cell_vertices"] = _var(("cell", "corner"), d.fields.cells, "cell_vertices")
-        data["mesh"] = ugrid_topology(dim, data["cell_vertices"])
-        if dim == 3:
-            data["mesh_volume_shape"] = xr.Variable(("cell",), np.zeros(len(data["cell_vertices"]), np.int8), attrs={
-                "cf_role": "volume_shape_type", "long_name": "the shape of each cell", "flag_values": np.int8(0),
-                "flag_meanings": "tetrahedron"})
+        for name, var in ugrid_mesh("mesh", dim, d.vertex_xyz, d.fields.cells).items():
+            (coords if name.startswith("vertex_") else data)[name] = var
         data["u_dofs"] = _var(("snapshot", "dof"), np.stack([s[1] for s in snaps]), "u_dofs")
         vd = d.vertex_dofs
         data["u_nodes"] = _var(("snapshot", "vertex", "component"), np.stack([s[1][vd] for s in snaps]), "u_nodes")
@@ -337,18 +330,40 @@ UGRID_CELLS = {1: ("edge_node_connectivity", "", "edge"), 2: ("face_node_connect
                3: ("volume_node_connectivity", "tetrahedron", "volume")}
 
 
-def ugrid_topology(dim: int, connectivity: xr.Variable) -> xr.Variable:
-    """The UGRID mesh topology variable of a body (and the roles on its connectivity, in place): a reader of UGRID
-    (e.g. xugrid, ParaView's UGRID reader) finds the vertices in ``vertex_x/y/z`` and the cells in
-    ``cell_vertices`` (0-based)."""
-    role, shape, _ = UGRID_CELLS[dim]
-    connectivity.attrs.update(cf_role=role, start_index=0)
+def ugrid_mesh(name: str, dim: int, vertex_xyz: np.ndarray, cells: np.ndarray) -> dict:
+    """The variables of one mesh by the UGRID conventions: the topology variable ``name``, the vertices and the
+    cells (0-based). A reader of UGRID (e.g. xugrid, ParaView's UGRID reader) finds them from the topology.
+
+    The body's mesh is ``"mesh"`` with ``vertex_x/y/z(vertex)`` and ``cell_vertices(cell, corner)``; any other
+    ``name`` (the coarser meshes of an adapted run's snapshots) prefixes its variables and dimensions:
+    ``mesh_1_vertex_x(mesh_1_vertex)``, ``mesh_1_cell_vertices(mesh_1_cell, corner)``.
+
+    Examples
+    --------
+    >>> import numpy as np
+    >>> out = ugrid_mesh("mesh_1", 2, np.array([[0.0, 0.0], [1.0, 0.0], [0.0, 1.0]]), np.array([[0, 1, 2]]))
+    >>> sorted(out), out["mesh_1"].attrs["node_coordinates"]
+    (['mesh_1', 'mesh_1_cell_vertices', 'mesh_1_vertex_x', 'mesh_1_vertex_y'], 'mesh_1_vertex_x mesh_1_vertex_y')
+    """
+    pre, role, shape, location = ("" if name == "mesh" else f"{name}_"), *UGRID_CELLS[dim]
+    out = {}
+    for c in range(dim):
+        units, long_name = VARIABLES[f"vertex_{COMPONENTS[c]}"]
+        out[f"{pre}vertex_{COMPONENTS[c]}"] = xr.Variable(f"{pre}vertex", vertex_xyz[:, c],
+                                                          {"units": units, "long_name": long_name})
+    units, long_name = VARIABLES["cell_vertices"]
+    out[f"{pre}cell_vertices"] = xr.Variable((f"{pre}cell", "corner"), cells, {
+        "units": units, "long_name": long_name, "cf_role": role, "start_index": 0})
     attrs = {"cf_role": "mesh_topology", "long_name": "the body's mesh (UGRID 1.0 topology)",
-             "topology_dimension": dim, "node_coordinates": " ".join(f"vertex_{c}" for c in COMPONENTS[:dim]),
-             role: "cell_vertices", f"{UGRID_CELLS[dim][2]}_dimension": "cell"}
+             "topology_dimension": dim, "node_coordinates": " ".join(f"{pre}vertex_{c}" for c in COMPONENTS[:dim]),
+             role: f"{pre}cell_vertices", f"{location}_dimension": f"{pre}cell"}
     if shape:
-        attrs["volume_shape_type"] = "mesh_volume_shape"
-    return xr.Variable((), np.int32(0), attrs=attrs)
+        attrs["volume_shape_type"] = f"{name}_volume_shape"
+        out[f"{name}_volume_shape"] = xr.Variable(f"{pre}cell", np.zeros(len(cells), np.int8), attrs={
+            "cf_role": "volume_shape_type", "long_name": "the shape of each cell", "flag_values": np.int8(0),
+            "flag_meanings": "tetrahedron"})
+    out[name] = xr.Variable((), np.int32(0), attrs=attrs)
+    return out
 
 
 

@@ -35,6 +35,7 @@ from __future__ import annotations
 
 import dataclasses
 import json
+import re
 import warnings
 
 import numpy as np
@@ -43,6 +44,7 @@ import xarray as xr
 from ..errors import Diverged
 from ..input.geometry import on_mesh
 from ..input.meshes import from_text, to_text
+from ..output.results import ugrid_mesh
 from . import adapt
 
 
@@ -87,6 +89,7 @@ class Follow:
         self.segments = []  # (the driver's: the meshes left so far, for the checkpoints)
         self.checkpoint_step = 0
         self.earlier_ndof = None  # (a continued run: the mesh of each record before it)
+        self.earlier_meshes = ([], {})  # (and of its snapshots: [(time, topology name)], the coarser meshes' variables)
         self._carried = {}  # (segments carried onto the last mesh: Follow.onto)
 
     def onto(self, disc, ds: xr.Dataset, final_disc, final: xr.Dataset):
@@ -112,6 +115,9 @@ class Follow:
             self.refinements = list(zip(archive.refinement_time.values.tolist(),
                                         archive.refinement_ndof.values.tolist()))
         self.earlier_ndof = archive.ndof.values.copy()
+        if "snapshot_mesh" in archive:
+            self.earlier_meshes = (list(zip(archive.snapshot_time.values, archive.snapshot_mesh.values.astype(str))),
+                                   {n: v for n, v in archive.variables.items() if re.match(r"mesh_\d+", n)})
         self.saved = (state["time"], state)
         out = archive.drop_vars("ndof")
         out["space_error_estimate"] = archive.space_error_estimate * max(self.scale, self.norm, 1e-300)
@@ -235,7 +241,7 @@ def run(make_job, model, numerics, execute_args: tuple):
             # back to the last estimate time that met the tolerance on this mesh; if none did since the run came to
             # this mesh, to where it came from (the same state, carried onto a finer mesh still), or to the start
             if r.saved is not None:
-                segments.append((job.disc, r.dataset, r.saved[0]))
+                segments.append((job.disc, r.dataset, len(follow.refinements)))  # (its mesh: after so many)
                 resume = Carried(r, job)
             follow.refined(resume.time if resume is not None else 0.0)
             model = dataclasses.replace(model, geometry=r.geometry)
@@ -290,7 +296,8 @@ def _first_pass(make_job, model, follow: Follow, execute_args: tuple):
 
 
 def merge(segments: list, follow: Follow, job) -> xr.Dataset:
-    """The records of every mesh (``segments``: (discretisation, Dataset, refinement time)) on the last mesh."""
+    """The records of every mesh (``segments``: (discretisation, Dataset, the refinements that made its mesh; None
+    for the last)) on the last mesh."""
     final_disc, final, _ = segments[-1]
     parts = [follow.onto(disc, ds, final_disc, final) for disc, ds, _ in segments[:-1]] + [(final, _snapshots(final))]
     timed = [name for name, v in final.data_vars.items() if "time" in v.dims]
@@ -317,6 +324,7 @@ def merge(segments: list, follow: Follow, job) -> xr.Dataset:
         made = [per_record[int(np.argmin(np.abs(time - t)))] for t, *_ in snaps]
         out["snapshot_ndof"] = ("snapshot", np.array(made, dtype=np.int64), {"units": "1", "long_name": "the "
                                 "displacement dofs of the mesh each snapshot was made on (carried onto the final mesh)"})
+        out = _snapshot_meshes(out, segments, follow)
     times, dofs = (list(c) for c in zip(*follow.refinements)) if follow.refinements else ([], [])
     out = out.assign_coords(refinement=("refinement", np.arange(len(times))))
     out["refinement_time"] = ("refinement", np.array(times, dtype=float), {"units": "s", "long_name":
@@ -335,6 +343,29 @@ def merge(segments: list, follow: Follow, job) -> xr.Dataset:
     out.attrs.update(space_error_estimate=largest, space_refinements=len(times), ndof=ndof[-1],
                      space_follow_json=json.dumps(follow.record()),
                      space_stop="max_dofs" if follow.full else "met")
+    return out
+
+
+def _snapshot_meshes(out: xr.Dataset, segments: list, follow: Follow) -> xr.Dataset:
+    """``out`` with the mesh each snapshot was made on: ``snapshot_mesh(snapshot)`` names its UGRID topology
+    (``"mesh"``, the final mesh, or ``"mesh_<j>"``, the mesh after j refinements, whose variables are added here or,
+    for the snapshots of a continued archive, kept from it)."""
+    earlier, meshes = follow.earlier_meshes
+    names, meshes = [], dict(meshes)
+    for i, (disc, ds, level) in enumerate(segments):
+        if "snapshot" not in ds.dims:
+            continue
+        own = "mesh" if i == len(segments) - 1 else f"mesh_{level}"
+        for t in ds.snapshot_time.values:
+            made = [m for s, m in earlier if abs(s - t) <= 1e-9 * max(1.0, abs(t))]
+            names.append(own if not made or made[0] == "mesh" else made[0])
+        if own in names and own != "mesh":
+            meshes.update(ugrid_mesh(own, disc.dim, disc.vertex_xyz, disc.fields.cells))
+    used = {n: v for n, v in meshes.items() if any(n == m or n.startswith(m + "_") for m in set(names) - {"mesh"})}
+    stale = [n for n in out.variables if re.fullmatch(r"mesh_\d+(_.*)?", n)]
+    out = out.drop_vars(stale).assign(used)
+    out["snapshot_mesh"] = ("snapshot", np.array(names, dtype=str), {"long_name": "the UGRID topology of the mesh "
+                            "each snapshot was made on (its fields are carried onto the final mesh, 'mesh')"})
     return out
 
 
