@@ -322,8 +322,7 @@ def test_bdf2_steps_reuse_their_factorisations(monkeypatch):
     rtol 1e-3) at most 30 % of the solves factor a matrix (without the grid: 43 %)."""
     import math
 
-    import workbench.schemes.implicit_euler as ie
-    from workbench.discrete import discretisation
+    from workbench.discrete import discretisation, solvers
     from workbench.schemes.bdf2 import BDF2
 
     scheme = BDF2(discretisation.build(workbench.scene("tp1", h=0.1)))
@@ -333,7 +332,7 @@ def test_bdf2_steps_reuse_their_factorisations(monkeypatch):
         a0 = (0.03 + 2 * ks) / ((0.03 + ks) * ks)
         assert 0.91 * k <= ks <= k and abs(8 * math.log2(a0) - round(8 * math.log2(a0))) < 1e-9
     calls = []
-    factor = ie.solvers.factor
-    monkeypatch.setattr(ie.solvers, "factor", lambda *a, **kw: calls.append(1) or factor(*a, **kw))
+    factor = solvers.factor
+    monkeypatch.setattr(solvers, "factor", lambda *a, **kw: calls.append(1) or factor(*a, **kw))
     ds = workbench.run("slab", **dict(SLAB, h=0.1), scheme="bdf2", rtol=1e-3, k=_first_step(1e-3), progress=False)
     assert len(calls) <= 0.3 * (ds.attrs["accepted_steps"] + ds.attrs["rejected_steps"]), (len(calls), ds.attrs)

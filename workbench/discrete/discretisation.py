@@ -30,6 +30,7 @@ from ..input import numerics as numerics_of
 from ..physics import kelvin_voigt
 from ..physics.ops import NGS
 from .boundary import ContactSide
+from .exchange import Exchange
 from .world import SERIAL
 
 
@@ -130,6 +131,16 @@ class Discretisation:
         n = self.numerics
         return solvers.choose(n.solver, self.dim, self.ndof, iterative=may_iterate(n.scheme, n.contact_solver))
 
+    def step_factor(self, M):
+        """The solver of an implicit step's operator ``M`` (assembled on K_A's pattern) by :meth:`step_solver`."""
+        from . import solvers
+
+        return solvers.factor(M, self.fes.FreeDofs(), self.u.vec, self.step_solver(), fes=self.fes)
+
+    def exchange(self):
+        """How the contact solver of an implicit step reaches the body (:mod:`workbench.discrete.exchange`)."""
+        return Exchange(self)
+
     def springs(self, solver):
         """The operators of the body on boundary springs with K_A solved by ``solver``: the explicit scheme's step
         limit (:class:`workbench.discrete.eigen.SpringOperators`)."""
@@ -146,9 +157,9 @@ class Discretisation:
         """This process's part of a state in the order of the whole body (:meth:`gather_state`)."""
         return state
 
-    def recording(self, make):
-        """The recorder of a run, ``make(disc)`` for the discretisation that records (on several processes: rank 0's
-        serial view, fed with the gathered states)."""
+    def recording(self, make, observer=None):
+        """The recorder of a run, ``make(disc)`` for the discretisation that records (several processes: rank 0's
+        serial view, fed with the gathered states and the snapshot vectors of ``observer``, the scheme's own)."""
         return make(self)
 
     def _index_arrays(self) -> None:
@@ -447,14 +458,18 @@ def assemble(d: Discretisation, matrices: bool = True, preconditioner: str | Non
     one, the viscous one of a Kelvin-Voigt body, those of a relaxation kernel), the contact side where contact laws
     act, the bonding field where a bonding law does, the contact vertices' weights where a layer constrains them,
     and the initial displacement. ``matrices=False``: the tables only (the serial view of a distributed body);
-    ``preconditioner``: K_A assembled with NGSolve's preconditioner of that name (``d.viscous_pre``)."""
+    ``preconditioner``: K_A (Model A's viscous stiffness, Model B's elastic one) assembled with NGSolve's
+    preconditioner of that name (``d.viscous_pre``)."""
     m = d.model
     if matrices:
         if m.viscous is not None and preconditioner is not None:
             d.viscous, d.viscous_pre = stiffness(d.fes, m.viscous, d.dim, preconditioner)
         elif m.viscous is not None:
             d.viscous = stiffness(d.fes, m.viscous, d.dim)
-        d.elastic = stiffness(d.fes, m.elastic, d.dim)
+        if m.viscous is None and preconditioner is not None:  # (Model B's steps solve with K_A = the elastic one)
+            d.elastic, d.viscous_pre = stiffness(d.fes, m.elastic, d.dim, preconditioner)
+        else:
+            d.elastic = stiffness(d.fes, m.elastic, d.dim)
         if m.memory is not None:
             _memory_parts(d)
     if m.contact or m.bonding is not None:

@@ -44,9 +44,9 @@ class Registered(NamedTuple):
 SCHEMES = {
     "explicit": Registered("A", "explicit_euler", "ExplicitEuler", error_control=False, iterative=True,
                            distributed=True),
-    "implicit": Registered("A", "implicit_euler", "ImplicitEuler", coupled=True),
-    "bdf2": Registered("A", "bdf2", "BDF2", coupled=True),
-    "vi": Registered("B", "memory_vi", "MemoryVI", coupled=True),
+    "implicit": Registered("A", "implicit_euler", "ImplicitEuler", coupled=True, distributed=True),
+    "bdf2": Registered("A", "bdf2", "BDF2", coupled=True, distributed=True),
+    "vi": Registered("B", "memory_vi", "MemoryVI", coupled=True, distributed=True),
 }
 
 #: The element size and order (a geometry adds its cell counts, ``nx`` ..., and a Hertz body ``h_contact``).

@@ -25,11 +25,12 @@ model on its part and runs the same time loop:
 Rank 0 also keeps a serial view of the body (:mod:`.order`): the archive, which rank 0 writes,
 has the serial run's layout and numbers to the solver's tolerance (tests/test_parallel.py).
 
-What runs: the schemes registered as ``distributed`` (:data:`workbench.input.numerics.SCHEMES`: Model A's
-explicit scheme), P1 or P2, in 2D and 3D, on any body whose contact side holds no pinned vertex; the
-archive, its plot and its VTK files are rank 0's. Refused by name before any work (:func:`check`):
-the other schemes (they condense on the contact dofs), the rod, higher orders, the banded and
-umfpack solvers. Restarts and checkpoints hold the state in the serial order, so a distributed run's
+What runs: the schemes registered as ``distributed`` (:data:`workbench.input.numerics.SCHEMES`: all of
+them), at fixed steps, P1 or P2, in 2D and 3D, on any body whose contact side holds no pinned vertex;
+the archive, its plot and its VTK files are rank 0's. The implicit schemes solve their step operator
+like K_A and their contact problem on rank 0's serial view, the other ranks serving its solves
+(:mod:`.contact`). Refused by name before any work (:func:`check`): error-controlled steps, adaptive
+meshes, the rod, higher orders, the banded and umfpack solvers. Restarts and checkpoints hold the state in the serial order, so a distributed run's
 archive goes on with one process or with another number of ranks, and a one-process archive on
 several.
 
@@ -49,6 +50,7 @@ from ..discrete.world import SERIAL, Serial, launched
 from ..errors import ParameterError
 from ..input.numerics import SCHEMES
 from .algebra import DistributedOperators, DistributedSolver, owned
+from .contact import DistributedExchange
 from .order import GatheringRecorder, Shell
 
 
@@ -132,6 +134,8 @@ def check(scene, model, numerics) -> None:
                "orders depend on the edges' orientation on each rank)")
     elif numerics.space_tol > 0:
         why = f"space_tol = {numerics.space_tol:g}: adaptive refinement runs on one process"
+    elif numerics.adaptive:
+        why = f"rtol = {numerics.rtol:g}: error-controlled steps run on one process (fixed steps: rtol = 0)"
     if why:
         raise ParameterError(f"{scene.name} on {w.size} MPI processes: {why}; run it with one process")
 
@@ -182,6 +186,17 @@ class DistributedDiscretisation(discretisation.Discretisation):
         method = "cg" if self.conjugate_gradients else "sparsecholesky"
         return DistributedSolver(self.viscous.mat, self.viscous_pre, self.fes.FreeDofs(), self.u.vec, method)
 
+    def step_solver(self) -> str:
+        return "cg" if self.conjugate_gradients else "sparsecholesky"
+
+    def step_factor(self, M):
+        """An implicit step's operator M: CG preconditioned by K_A's BDDC (M = a0 K_A + K_G, or Model B's K_A plus
+        a memory part, is spectrally equivalent to K_A), or the sparse factor gathered on rank 0."""
+        return DistributedSolver(M, self.viscous_pre, self.fes.FreeDofs(), self.u.vec, self.step_solver())
+
+    def exchange(self):
+        return DistributedExchange(self)
+
     def springs(self, solver):
         return DistributedOperators(self, solver)
 
@@ -191,9 +206,9 @@ class DistributedDiscretisation(discretisation.Discretisation):
     def scatter_state(self, state: dict, layout: dict) -> dict:
         return self.shell.local_state(state, layout)
 
-    def recording(self, make):
+    def recording(self, make, observer=None):
         """Every rank sends its part at the record times of rank 0's recorder, which records the serial view."""
-        return GatheringRecorder(self.shell, make(self.shell.disc) if self.world.root else None)
+        return GatheringRecorder(self.shell, make(self.shell.disc) if self.world.root else None, observer)
 
 
 def _vertex_wirebasket(fes, dim: int, nv: int) -> None:

@@ -138,11 +138,11 @@ class Shell:
             out["beta"] = self.facets.gather(state["beta"])
         out["extra"] = dict(state["extra"])
         for key, where in layout.items():
-            if key in state["extra"]:
-                order, value = self._order(where), np.asarray(state["extra"][key])
-                out["extra"][key] = order.gather(value[self.local_dofs] if where == "dof" else value)
-        if state["history"]:
-            raise NotImplementedError("a distributed scheme keeps no history of accepted states")
+            if key in state["extra"] and where != "root" and not _none(state["extra"][key]):  # (root: held in the
+                # serial order on rank 0 already)
+                out["extra"][key] = self._gathered(where, np.asarray(state["extra"][key]))
+        out["history"] = [(t, self.dofs.gather(np.asarray(u)[self.local_dofs]),
+                           None if b is None else self.facets.gather(b)) for t, u, b in state["history"]]
         return out if self.w.root else None
 
     def local_state(self, state: dict, layout: dict) -> dict:
@@ -151,12 +151,26 @@ class Shell:
         out["u"], out["v"] = (self._local_dofs(state[k]) for k in ("u", "v"))
         if state["beta"] is not None:
             out["beta"] = self.facets.pick(state["beta"])
+        out["history"] = [(t, self._local_dofs(u), None if b is None else self.facets.pick(b))
+                          for t, u, b in state["history"]]
         out["extra"] = dict(state["extra"])
         for key, where in layout.items():
-            if key in state["extra"]:
-                value = state["extra"][key]
-                out["extra"][key] = self._local_dofs(value) if where == "dof" else self._order(where).pick(value)
+            if key in state["extra"] and where != "root" and not _none(state["extra"][key]):
+                value = np.asarray(state["extra"][key])
+                if where == "dof":
+                    value = np.array([self._local_dofs(row) for row in value]) if value.ndim == 2 else \
+                        self._local_dofs(value)
+                out["extra"][key] = value if where == "dof" else self._order(where).pick(value)
         return out
+
+    def _gathered(self, where: str, value: np.ndarray):
+        """An array of a scheme's state (per local dof or per point; a 2D array: per row) in the serial order, on
+        rank 0; collective."""
+        order = self._order(where)
+        if value.ndim == 2:  # (several dof vectors: Model B's memory histories)
+            rows = [self._gathered(where, row) for row in value]
+            return np.array(rows) if self.w.root else None
+        return order.gather(value[self.local_dofs] if where == "dof" else value)
 
     def _order(self, where: str) -> Order:
         return {"dof": self.dofs, "point": self.points, "facet": self.facets}[where]
@@ -165,6 +179,12 @@ class Shell:
         out = np.zeros(self.local.ndof)
         out[self.local_dofs] = self.dofs.pick(serial)
         return out
+
+
+def _none(value) -> bool:
+    """Whether a state's array is an empty list of dof vectors (Model B without memory), the same on every rank (an
+    empty array may be rank 0's part of a dof vector: it holds no cells)."""
+    return isinstance(value, list) and not value
 
 
 def _serial_numbers(comm, xyz, serial_xyz, what, group=None, serial_group=None):
@@ -218,14 +238,19 @@ class GatheringRecorder:
     ranks) takes, every rank sends its part of u (and of v at the snapshots) and of beta, and rank 0 records the
     shell with the serial code."""
 
-    def __init__(self, shell: Shell, recorder=None):
-        self.shell, self.recorder, self.w = shell, recorder, shell.w
+    def __init__(self, shell: Shell, recorder=None, observer=None):
+        self.shell, self.recorder, self.w, self.observer = shell, recorder, shell.w, observer
 
     def record(self, t: float, final: bool = False, control=None) -> None:
         due = self.w.bcast(self.recorder.due(t, final) if self.w.root else None)
         if not any(due):
             return
         self.shell.gather(velocity=due[1])
+        if due[1] and self.observer is not None:  # (a snapshot: the stress's other dof vectors, e.g. the memory's)
+            shell = self.shell
+            vectors = [shell.dofs.gather(v[shell.local_dofs]) for v in self.observer.snapshot_vectors()]
+            if self.w.root:
+                self.recorder.observer.gathered = vectors
         if self.w.root:
             self.recorder.take(t, *due, control=control)
 

@@ -318,7 +318,7 @@ class _Run:
         every = n.adaptive  # error-controlled runs keep every step (their short steps are where things happen)
         self.recorder = disc.recording(lambda d: results.Recorder(
             d, scheme.observer(d), sc["T"], sc["snapshots"], record_times,
-            MAX_RECORDS_ADAPTIVE if every else MAX_RECORDS, every_step=every))
+            MAX_RECORDS_ADAPTIVE if every else MAX_RECORDS, every_step=every), scheme.observer(disc))
         if n.space_tol > 0:
             from ..discrete.estimator import Estimator
 

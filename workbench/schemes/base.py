@@ -143,7 +143,7 @@ class Scheme:
         u = self.d.u.vec.FV().NumPy()
         self.history.append((float(t), u.copy(), None if beta is None else beta.copy()))
         del self.history[: -self.keep]
-        self.u_scale = max(self.u_scale, float(np.abs(u).max()))
+        self.u_scale = max(self.u_scale, self.d.world.max(float(np.abs(u).max(initial=0.0))))
 
     def state(self, restart: bool = False) -> dict:
         """The full state as copies (module docs); ``restart``: with the cache's make-up (a new process)."""
@@ -299,6 +299,15 @@ class Observer:
 
     def stress_parts(self) -> list:
         raise NotImplementedError
+
+    #: The vectors of :meth:`snapshot_vectors` in the order of the whole body, where a run on several MPI processes
+    #: records its serial view (None: this observer's own discretisation holds them).
+    gathered = None
+
+    def snapshot_vectors(self) -> list:
+        """The dof vectors besides u and v that :meth:`stress_parts` reads (gathered for the serial view of a body
+        distributed over several MPI processes); none by default."""
+        return []
 
 
 #: An event (a kink the step must land on) is the switching of this fraction of a group's weight (of the contact

@@ -39,7 +39,6 @@ from collections import OrderedDict
 
 import numpy as np
 
-from ..discrete import solvers
 from ..discrete.condensation import CondensedNewton, CondensedSystem, ContactOperator, CoupledNewton, SchurOperator
 from ..physics.ops import NP
 from .base import ErrorControlled
@@ -76,9 +75,16 @@ class ImplicitEuler(ErrorControlled, KelvinVoigtScheme):
         self.z = np.zeros(d.ndof)
         self.u_prev = np.zeros(d.ndof)
         self.lift = d.u.vec.CreateVector()
-        self.op = ContactOperator(d) if d.side is not None else None
+        # the contact problem is solved on the view of the body that holds its side (module docs; on several
+        # processes rank 0's, while the other ranks serve its back-substitutions: self.exchange)
+        self.exchange = d.exchange()
+        view = self.exchange.view
+        self.op = ContactOperator(view) if self.exchange.solves and view.side is not None else None
+        size = self.exchange.share(self.op.size if self.op is not None else 0)
+        self.contact = size > 0
+        self.exchange.bind(self.op.C if self.op is not None else ())
         self.method = d.step_solver()
-        self.coupled = self.op is not None and d.numerics.coupled_contact(self.op.size, self.method)
+        self.coupled = self.contact and d.numerics.coupled_contact(size, self.method)
         self.bonding = d.model.bonding
         self._factors = OrderedDict()
         self.newton = None  # (the step's, from _prepare)
@@ -86,7 +92,7 @@ class ImplicitEuler(ErrorControlled, KelvinVoigtScheme):
         self.resolved = True
 
     def preflight(self, k_max: float) -> dict:
-        used = {"contact_solver_used": "coupled" if self.coupled else "condensed"} if self.op is not None else {}
+        used = {"contact_solver_used": "coupled" if self.coupled else "condensed"} if self.d.side is not None else {}
         return self.bonding_check(k_max) | used
 
     # -- the multistep formula -------------------------------------------------------------------------------
@@ -120,18 +126,21 @@ class ImplicitEuler(ErrorControlled, KelvinVoigtScheme):
             built_from = a0 if entry is None else entry
             M = d.viscous.mat.CreateMatrix()
             M.AsVector().data = built_from * d.viscous.mat.AsVector() + d.elastic.mat.AsVector()
-            solver = solvers.factor(M, d.fes.FreeDofs(), d.u.vec, self.method, fes=d.fes)
-            newton = None
-            if self.op is not None and self.op.size and self.coupled:
-                newton = CoupledNewton(SchurOperator(solver, d.ndof, self.op.C), self.op)
-            elif self.op is not None and self.op.size:
-                newton = CondensedNewton(CondensedSystem(solver, d.ndof, self.op.C), self.op)
+            solver = d.step_factor(M)
+            newton = self.exchange.run(lambda: self._newton(solver), solver) if self.contact else None
             self._factors[key] = (M, solver, newton, built_from)
             while len(self._factors) > self.cache_size:
                 self._factors.popitem(last=False)
         self._factors.move_to_end(key)
         self.M, self.solver, self.newton, _ = self._factors[key]
         self.resolved = self.bonding is None or self.bonding.resolved(k, d.model.beta0)
+
+    def _newton(self, solver):
+        """The contact solver of the operator ``solver`` solves (where the contact problem is solved)."""
+        view, proxy = self.exchange.view, self.exchange.proxy(solver)
+        if self.coupled:
+            return CoupledNewton(SchurOperator(proxy, view.ndof, self.op.C), self.op)
+        return CondensedNewton(CondensedSystem(proxy, view.ndof, self.op.C), self.op)
 
     def _cache_state(self) -> list:
         """The a0 each cached operator was built from, least recently used first."""
@@ -174,10 +183,10 @@ class ImplicitEuler(ErrorControlled, KelvinVoigtScheme):
         if d.moves_clamp:
             self.z[d.dirichlet_dofs] = d.dirichlet_value(t_next) - u[d.dirichlet_dofs]
         self.iterations = self.passes = 0
-        if self.newton is not None:
+        if self.contact:
             self._contact(u, k, t_next)
         u[:] = self.u_prev + self.z
-        if self.newton is None and self.bonding is not None:
+        if not self.contact and self.bonding is not None:
             self._update_beta(k, d.beta.vec.FV().NumPy()[d.beta_dofs].copy())
         d.v.vec.FV().NumPy()[:] = self._velocity(self.z, a0, w)
         self.k_last = k
@@ -185,37 +194,49 @@ class ImplicitEuler(ErrorControlled, KelvinVoigtScheme):
     def _contact(self, u: np.ndarray, k: float, t_next: float) -> None:
         """The contact forces of the step by the condensed semismooth Newton, coupled with beta_n (the passes of the
         module docs), taken off the contact-free increment ``self.z``; ``u`` holds u_{n-1} (its contact dofs the
-        solution, for the bonding update)."""
-        d, C = self.d, self.op.C
-        z_C = u[C] + self.z[C]
+        solution, for the bonding update). The Newton iteration runs where the contact problem is solved, on the
+        contact dofs of the view (:attr:`exchange`); beta is updated where its facets are."""
+        d, x = self.d, self.exchange
+        C = self.op.C if self.op is not None else None
+        z_C = x.gather(u + self.z)
+        z_C = z_C[C].copy() if x.solves else None
         # initial guess: linear extrapolation of the contact displacement (often the right active set)
+        u_C = x.gather(u)
+        u_C = u_C[C].copy() if x.solves else None
         if len(self.history) >= 2:
-            u_C_prev, k_prev = self.history[-2][1][C], self.history[-1][0] - self.history[-2][0]
-            u_C = u[C] + (k / k_prev) * (u[C] - u_C_prev)
-        else:
-            u_C = u[C].copy()
+            before, k_prev = x.gather(self.history[-2][1]), self.history[-1][0] - self.history[-2][0]
+            if x.solves:
+                u_C += (k / k_prev) * (u_C - before[C])
         beta = d.beta.vec.FV().NumPy() if d.beta is not None else None
         beta_old = beta[d.beta_dofs].copy() if beta is not None else None
         passes = self.max_passes
         if beta is not None and self.resolved:
             self._predict_beta(k, beta_old)  # drops beta by at most e^-0.1 here
             passes = 1
-        self.newton.iterations = self.newton.linear_iterations = 0
+        if self.newton is not None:
+            self.newton.iterations = self.newton.linear_iterations = 0
         for self.passes in range(1, passes + 1):
-            f_C = self.newton.solve(u_C, z_C, t_next, d.scene.name)
+            x.sync_beta()
+            f_C = x.run(lambda: self.newton.solve(u_C, z_C, t_next, d.scene.name), self.solver)
             if beta is None:
                 break
-            u[C] = u_C  # the bonding update reads u on the contact side only
+            x.put(u, self._on_view(C, u_C))  # the bonding update reads u on the contact side only
             previous = beta[d.beta_dofs].copy()
             self._update_beta(k, beta_old)
-            if np.abs(beta[d.beta_dofs] - previous).max() <= self.beta_tol:
+            if d.world.max(np.abs(beta[d.beta_dofs] - previous).max(initial=0.0)) <= self.beta_tol:
                 break
-        self.iterations = self.newton.iterations
-        correction = np.zeros(d.ndof)
-        correction[C] = f_C
+        self.iterations = x.share(self.newton.iterations if self.newton is not None else 0)
         out = np.zeros(d.ndof)
-        self.solver.solve(correction, out)
+        self.solver.solve(x.spread(self._on_view(C, f_C)), out)
         self.z -= out
+
+    def _on_view(self, C, values):
+        """A dof vector of the view with ``values`` on the contact dofs ``C`` (None where the solver does not run)."""
+        if values is None:
+            return None
+        out = np.zeros(self.exchange.view.ndof)
+        out[C] = values
+        return out
 
     # -- the bonding field --------------------------------------------------------------------------------------
     def _r2(self, u):

@@ -48,8 +48,7 @@ from collections import OrderedDict
 
 import numpy as np
 
-from ..discrete import solvers
-from ..discrete.condensation import CondensedSystem, SchurOperator, matrix_diagonal
+from ..discrete.condensation import CondensedSystem, SchurOperator
 from ..physics import unilateral
 from .base import ErrorControlled, Observer, Scheme, first_event
 from .contact_nodes import ContactNodes
@@ -62,6 +61,9 @@ class MemoryVI(ErrorControlled, Scheme):
 
     name = "vi"
     cache_size = 4
+    #: The memory's histories are dof vectors (each rank its part); the contact points' states and forces are held
+    #: in the serial order where the contact problem is solved ("root").
+    distributed_layout = {"histories": "dof", "stored": "dof", "states": "root", "lam": "root"}
     state_variables = {
         "histories": ("", "restart state: memory histories H_i (vi), dof vectors"),
         "times": ("s", "restart state: times of the stored steps (vi, general kernel)"),
@@ -74,10 +76,17 @@ class MemoryVI(ErrorControlled, Scheme):
         super().__init__(d)
         self.trapezoid = d.numerics.memory_rule == "trapezoid"
         self.order = 2 if self.trapezoid else 1
-        self.nodes = ContactNodes(d)
+        # the contact points live on the view of the body that solves the contact problem (on several processes
+        # rank 0's serial view, the other ranks serving its back-substitutions: self.exchange)
+        self.exchange = x = d.exchange()
+        self.nodes = ContactNodes(x.view) if x.solves else None
+        self.size = x.share(self.nodes.size if x.solves else 0)
+        self.vertices_only = x.share(self.nodes.B is None if x.solves else None)  # (P1: s is u at the normal dofs)
+        x.bind(self.nodes.C if x.solves else ())
         self.method = d.step_solver()
-        self.coupled = CoupledActiveSet(self.nodes) if d.numerics.coupled_contact(self.nodes.size, self.method) \
-            else None
+        self.coupled = None
+        if d.numerics.coupled_contact(self.size, self.method):
+            self.coupled = CoupledActiveSet(self.nodes) if x.solves else True
         self.memory = rule_for(d, self.trapezoid)  # (None without memory)
         self.pinned = d.pinned_nodes
         self._balance = None  # f - memory of the last equilibrium (only for the reaction of pinned contact nodes)
@@ -113,15 +122,20 @@ class MemoryVI(ErrorControlled, Scheme):
                 vec.data = d.elastic.mat.AsVector()
                 for wi, si, (K, _, _) in zip(weights, self.memory.scales, d.memory):
                     vec.data += (wi * si) * K.mat.AsVector()
-            solver = solvers.factor(M, d.fes.FreeDofs(), d.u.vec, self.method, fes=d.fes)
-            nodes = self.nodes
-            schur = SchurOperator(solver, d.ndof, nodes.C, nodes.sign, matrix_diagonal(M), nodes.B) \
-                if self.coupled is not None else None
-            S_inv = None if schur is not None else self._condense(solver)
-            # z = s + rho lam / S_ii-scaled: the prox scaling comes from the body's own stiffness. A large factor
-            # predicts the states from the contact force (measured: factor 1 cycles on memory_slab, 10 and 100 settle)
-            stiffness = schur.stiffness if schur is not None else np.diag(S_inv)
-            rho = 100.0 / stiffness if nodes.size else np.zeros(0)
+            solver = d.step_factor(M)
+            x, nodes, schur, S_inv, rho = self.exchange, self.nodes, None, None, None
+            if self.coupled is not None:
+                diagonal = x.diagonal(M)
+                schur = SchurOperator(x.proxy(solver), x.view.ndof, nodes.C, nodes.sign, diagonal, nodes.B) \
+                    if x.solves else None
+            else:
+                S_inv = x.run(lambda: self._condense(solver), solver)
+            if x.solves:
+                # z = s + rho lam / S_ii-scaled: the prox scaling comes from the body's own stiffness. A large factor
+                # predicts the states from the contact force (measured: factor 1 cycles on memory_slab, 10 and 100
+                # settle)
+                stiffness = schur.stiffness if schur is not None else np.diag(S_inv)
+                rho = 100.0 / stiffness if nodes.size else np.zeros(0)
             self._operators[key] = [M, solver, S_inv, rho, schur]
             while len(self._operators) > self.cache_size:
                 self._operators.popitem(last=False)
@@ -132,7 +146,8 @@ class MemoryVI(ErrorControlled, Scheme):
 
     def _condense(self, solver):
         """The dense contact stiffness S^-1 = (B K^-1 B^T)^-1, one back-substitution per contact point."""
-        return CondensedSystem(solver, self.d.ndof, self.nodes.C, B=self.nodes.B).S0_inv  # (P1: sign^2 = 1)
+        x = self.exchange
+        return CondensedSystem(x.proxy(solver), x.view.ndof, self.nodes.C, B=self.nodes.B).S0_inv  # (P1: sign^2 = 1)
 
     def _condensed_fallback(self):
         """(S_inv, rho) of the current operator for the condensed solver, built once (the coupled solve's fallback)."""
@@ -165,7 +180,7 @@ class MemoryVI(ErrorControlled, Scheme):
 
     def _equilibrium(self, time: float, memory: np.ndarray) -> None:
         """u = the solution of the inequality at ``time`` with the memory vector K_C H given."""
-        d, nodes = self.d, self.nodes
+        d, x = self.d, self.exchange
         u = d.u.vec.FV().NumPy()
         d.load_vector(time, self.rhs)
         self.rhs_np -= memory
@@ -178,34 +193,55 @@ class MemoryVI(ErrorControlled, Scheme):
         self.solver.solve(self.rhs_np, self.z)
         if d.moves_clamp:
             self.z[d.dirichlet_dofs] = d.dirichlet_value(time)
-        solves, iterations = 1, 0
-        if nodes.size:
-            if self.coupled is not None:
-                before = self.schur.applications
-                s, lam, iterations = self.coupled.solve(self.schur, self.rho, nodes.distance(self.z), time,
-                                                        self._condensed_fallback)
-                # (linear_solves below adds the iterations: each back-substitution of the solve counted once)
-                solves += self.schur.applications - before - iterations
-            else:
-                s, lam, iterations = nodes.solve(self.S_inv, self.rho, nodes.distance(self.z), time)
-            if nodes.g0 is not None:  # (the layer's law acts on the distance to the foundation)
-                s = s + nodes.g0
+        if self.size:
+            z = x.gather(self.z)
+            found = x.run(lambda: self._contact(z, time), self.solver)
             out = np.zeros(d.ndof)
-            self.solver.solve(nodes.force(lam, d.ndof), out)
-            solves += 1
+            self.solver.solve(x.spread(found[0] if x.solves else None), out)
             u[:] = self.z - out
-            if nodes.B is None:
-                u[nodes.C] = nodes.sign * s  # the constrained values exactly (removes round-off above g)
+            if self.vertices_only:  # the constrained values exactly (removes round-off above g)
+                x.put(u, found[1] if x.solves else None)
         else:
             u[:] = self.z
+        u_view = x.gather(u)
+        if x.solves:
+            self.diag = self._diagnostics(u_view, found[2] if self.size else None)
+
+    def _contact(self, z: np.ndarray, time: float):
+        """Where the contact problem is solved, from the contact-free displacement ``z`` (a vector of the view): (the
+        contact forces as a dof vector of the view, the view's u at the contact dofs where the constraint fixes it
+        (else ``z`` there, kept), (the active-set iterations, the back-substitutions))."""
+        nodes, solves = self.nodes, 0
+        if self.coupled is not None:
+            before = self.schur.applications
+            s, lam, iterations = self.coupled.solve(self.schur, self.rho, nodes.distance(z), time,
+                                                    self._condensed_fallback)
+            # (linear_solves adds the iterations: each back-substitution of the solve counted once)
+            solves = self.schur.applications - before - iterations
+        else:
+            s, lam, iterations = nodes.solve(self.S_inv, self.rho, nodes.distance(z), time)
+        if nodes.g0 is not None:  # (the layer's law acts on the distance to the foundation)
+            s = s + nodes.g0
+        fixed = None
+        if nodes.B is None:
+            fixed = np.zeros_like(z)
+            fixed[nodes.C] = nodes.sign * s
+        return nodes.force(lam, len(z)), fixed, (iterations, solves)
+
+    def _diagnostics(self, u: np.ndarray, counted) -> dict:
+        """The step's record (where the contact problem is solved; ``u`` a vector of the view; ``counted``: the
+        contact solve's iterations and back-substitutions besides them, None without contact points)."""
+        nodes = self.nodes
+        iterations, solves = counted or (0, 0)
         counts = np.bincount(nodes.states, minlength=4)
-        self.diag = {
-            "iterations": iterations, "linear_solves": solves + iterations,
+        out = {  # (the back-substitutions: z, the contact solve's, and u from the contact forces)
+            "iterations": iterations, "linear_solves": 1 + (solves + iterations + 1 if counted else 0),
             "n_separated": int(counts[0]), "n_stuck": int(counts[1]), "n_compliant": int(counts[2]),
             "n_rigid": int(counts[3]), "complementarity": nodes.complementarity(u, self.rho),
         }
         if self.coupled is not None:
-            self.diag["linear_iterations"] = self.coupled.linear_iterations
+            out["linear_iterations"] = self.coupled.linear_iterations
+        return out
 
     def diagnostics(self) -> dict:
         return dict(self.diag)
@@ -254,12 +290,14 @@ class MemoryVI(ErrorControlled, Scheme):
 
     def _extra_state(self) -> dict:
         memory = self.memory.state() if self.memory is not None else {"histories": []}
-        return memory | self.nodes.state() | {"diag": dict(self.diag)}
+        nodes = self.nodes.state() if self.nodes is not None else {}  # (held where the contact problem is solved)
+        return memory | nodes | {"diag": dict(self.diag)}
 
     def _restore_extra(self, extra: dict) -> None:
         if self.memory is not None:
             self.memory.restore(extra)
-        self.nodes.restore(extra)
+        if self.nodes is not None:
+            self.nodes.restore(extra)
         self.diag = dict(extra["diag"])
 
     def observer(self, disc=None) -> "MemoryObserver":
@@ -321,4 +359,11 @@ class MemoryObserver(Observer):
     def stress_parts(self) -> list:
         """sigma_n = A eps(u_n) + M_n (M_n from the memory histories)."""
         memory = self.scheme.memory
-        return [(self.d.model.elastic, self.d.u.vec.FV().NumPy())] + (memory.stress_parts() if memory else [])
+        parts = memory.stress_parts() if memory else []
+        if self.gathered is not None:  # (the serial view of a distributed body: the histories gathered)
+            parts = [(C, H) for (C, _), H in zip(parts, self.gathered)]
+        return [(self.d.model.elastic, self.d.u.vec.FV().NumPy())] + parts
+
+    def snapshot_vectors(self) -> list:
+        memory = self.scheme.memory
+        return [H for _, H in memory.stress_parts()] if memory else []
