@@ -121,7 +121,7 @@ def check(scene, model, numerics) -> None:
     if not SCHEMES[numerics.scheme].distributed:
         runs = ", ".join(repr(n) for n, e in SCHEMES.items() if e.distributed)
         why = (f"scheme = {numerics.scheme!r} (Model {model.kind}): only the scheme(s) {runs} run on several processes "
-               "(the others condense on the contact dofs, one solve per contact dof)")
+               "(the others are registered as one-process only)")
     elif numerics.solver not in ("auto", "cg", "sparsecholesky"):
         why = (f"solver = {numerics.solver!r}: on several processes the solver is 'cg' (conjugate gradients "
                "with BDDC; 'auto' takes it) or 'sparsecholesky' (the factor gathered on rank 0)")
