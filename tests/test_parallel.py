@@ -95,18 +95,22 @@ IMPLICIT = [(3, "block", dict(BLOCK, scheme="bdf2")),
             (2, "tp4", dict(h=0.1, order=2, T=0.1, k=0.01, scheme="implicit")),
             (3, "memory_block", dict(h=0.25, snapshots=(0.5, 1.0))),
             (2, "memory_slab", dict(h=0.25, order=2, solver="sparsecholesky", contact_solver="condensed",
-                                    snapshots=(1.0,)))]
+                                    snapshots=(1.0,))),
+            (2, "memory_hertz3d", dict(h_contact=0.02)),
+            (3, "hertz", dict(T=0.2))]
 
 
 @pytest.mark.mpi
 @pytest.mark.slow
 @pytest.mark.parametrize("n, scene, values", IMPLICIT, ids=["block-bdf2-np3", "slab-P2-implicit-np2",
-                                                             "memory_block-vi-np3", "memory_slab-P2-factor-np2"])
+                                                             "memory_block-vi-np3", "memory_slab-P2-factor-np2",
+                                                             "hemisphere-vi-np2", "hertz-implicit-np3"])
 def test_the_implicit_schemes_distributed_equal_the_serial_run(tmp_path, n, scene, values):
     """Model A's backward Euler and BDF2 (normal compliance, the glue, debonding) and Model B's inequality (memory,
     the unilateral layer, P2's trace at the facet midpoints) on N processes: the archive has the serial one's
     variables, its numbers to the solvers' tolerance (CG 1e-10 against a factor), the same contact states, and
-    the restart state (the memory's histories, the contact points' forces) in the serial order."""
+    the restart state (the memory's histories, the contact points' forces) in the serial order. The Hertz bodies
+    hold their apex: its pressure is the support's reaction, summed over the ranks and gathered to rank 0."""
     out = tmp_path / "mpi.nc"
     code, stdout, stderr = _run_distributed(n, scene, values, out)
     assert code == 0, stderr
@@ -118,7 +122,7 @@ def test_the_implicit_schemes_distributed_equal_the_serial_run(tmp_path, n, scen
     assert mpi.attrs["status"] == "complete" and mpi.attrs["mpi_processes"] == n
     assert mpi.attrs["ndof"] == serial.attrs["ndof"] and mpi.attrs["nsteps"] == serial.attrs["nsteps"]
     assert mpi.attrs["contact_solver_used"] == values.get("contact_solver", "coupled")
-    assert set(serial.variables) == set(mpi.variables) - {"linear_iterations"}  # (one process: condensed)
+    assert set(serial.variables) - {"linear_iterations"} == set(mpi.variables) - {"linear_iterations"}
     compared = 0
     for name in ("u_probe", "u_contact", "beta", "contact_pressure", "contact_pressure_midpoint", "u_dofs", "stress",
                  "state_u", "state_v", "state_beta", "state_histories", "state_lam"):
@@ -126,7 +130,7 @@ def test_the_implicit_schemes_distributed_equal_the_serial_run(tmp_path, n, scen
             np.testing.assert_array_equal(mpi[name].shape, serial[name].shape)
             assert _relative(mpi[name].values, serial[name].values) < 1e-8, name
             compared += 1
-    assert compared >= 8
+    assert compared >= 7
     for name in ("contact_state", "state_states", "n_rigid", "n_separated"):
         if name in serial:
             np.testing.assert_array_equal(mpi[name].values, serial[name].values, err_msg=name)

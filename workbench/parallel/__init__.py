@@ -26,7 +26,8 @@ Rank 0 also keeps a serial view of the body (:mod:`.order`): the archive, which 
 has the serial run's layout and numbers to the solver's tolerance (tests/test_parallel.py).
 
 What runs: the schemes registered as ``distributed`` (:data:`workbench.input.numerics.SCHEMES`: all of
-them), at fixed steps, P1 or P2, in 2D and 3D, on any body whose contact side holds no pinned vertex;
+them), at fixed steps, P1 or P2, in 2D and 3D (the Hertz bodies' held apex: its reaction is summed over the
+ranks and gathered to rank 0 at each record, :meth:`workbench.schemes.base.Observer.record_vectors`);
 the archive, its plot and its VTK files are rank 0's. The implicit schemes solve their step operator
 like K_A and their contact problem on rank 0's serial view, the other ranks serving its solves
 (:mod:`.contact`). Refused by name before any work (:func:`check`): error-controlled steps, adaptive
@@ -125,8 +126,6 @@ def check(scene, model, numerics) -> None:
     elif numerics.solver not in ("auto", "cg", "sparsecholesky"):
         why = (f"solver = {numerics.solver!r}: on several processes the solver is 'cg' (conjugate gradients "
                "with BDDC; 'auto' takes it) or 'sparsecholesky' (the factor gathered on rank 0)")
-    elif model.geometry.pins_contact:
-        why = f"the {scene.geometry} body holds contact vertices (its apex): not on several processes"
     elif model.geometry.dim == 1:
         why = "the rod (1D) does not run on several processes"
     elif numerics.order > 2:

@@ -11,7 +11,7 @@ from __future__ import annotations
 import numpy as np
 
 from ..discrete import discretisation
-from .algebra import owned
+from .algebra import cumulate, owned
 
 
 def serial_shell(d, mesh):
@@ -246,11 +246,16 @@ class GatheringRecorder:
         if not any(due):
             return
         self.shell.gather(velocity=due[1])
-        if due[1] and self.observer is not None:  # (a snapshot: the stress's other dof vectors, e.g. the memory's)
+        if self.observer is not None:  # (what the serial view's observer reads besides the state)
             shell = self.shell
-            vectors = [shell.dofs.gather(v[shell.local_dofs]) for v in self.observer.snapshot_vectors()]
+            if due[1]:  # (a snapshot: the stress's other dof vectors, e.g. the memory's)
+                vectors = [shell.dofs.gather(v[shell.local_dofs]) for v in self.observer.snapshot_vectors()]
+                if self.w.root:
+                    self.recorder.observer.gathered = vectors
+            work = shell.local.u.vec.CreateVector()  # (each rank's part of a sum, summed over the ranks first)
+            vectors = [shell.dofs.gather(cumulate(work, v)[shell.local_dofs]) for v in self.observer.record_vectors(t)]
             if self.w.root:
-                self.recorder.observer.gathered = vectors
+                self.recorder.observer.gathered_record = vectors or None
         if self.w.root:
             self.recorder.take(t, *due, control=control)
 

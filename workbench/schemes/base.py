@@ -300,9 +300,15 @@ class Observer:
     def stress_parts(self) -> list:
         raise NotImplementedError
 
-    #: The vectors of :meth:`snapshot_vectors` in the order of the whole body, where a run on several MPI processes
-    #: records its serial view (None: this observer's own discretisation holds them).
-    gathered = None
+    #: The vectors of :meth:`snapshot_vectors` (``gathered``) and of :meth:`record_vectors` (``gathered_record``) in
+    #: the order of the whole body, where a run on several MPI processes records its serial view (None: this
+    #: observer's own discretisation holds them).
+    gathered = gathered_record = None
+
+    def record_vectors(self, t: float) -> list:
+        """Dof vectors that :meth:`node_values` reads at a record besides the state (each process its part of the
+        sum; gathered for the serial view of a distributed body, where no matrices are); none by default."""
+        return []
 
     def snapshot_vectors(self) -> list:
         """The dof vectors besides u and v that :meth:`stress_parts` reads (gathered for the serial view of a body

@@ -88,7 +88,6 @@ class MemoryVI(ErrorControlled, Scheme):
         if d.numerics.coupled_contact(self.size, self.method):
             self.coupled = CoupledActiveSet(self.nodes) if x.solves else True
         self.memory = rule_for(d, self.trapezoid)  # (None without memory)
-        self.pinned = d.pinned_nodes
         self._balance = None  # f - memory of the last equilibrium (only for the reaction of pinned contact nodes)
         self._operators = OrderedDict()
         self._use(0.0)
@@ -184,7 +183,7 @@ class MemoryVI(ErrorControlled, Scheme):
         u = d.u.vec.FV().NumPy()
         d.load_vector(time, self.rhs)
         self.rhs_np -= memory
-        if self.pinned.size:
+        if d.geometry.pins_contact:  # (on every process of a distributed body: the reaction is summed over them)
             self._balance = self.rhs_np.copy()
         if d.moves_clamp:  # u = delta(t_n) at x = 0
             d.lift(time, self.tmp.FV().NumPy())
@@ -316,22 +315,32 @@ class MemoryObserver(Observer):
         m = nodes.n_vertex_points  # (P2: the first m contact points are the vertices)
         pressure[nodes.active_nodes] = nodes.lam[:m] / nodes.w[:m]
         state[nodes.active_nodes] = nodes.states[:m]
-        if s.pinned.size and s._balance is not None:
+        pinned = d.pinned_nodes
+        if pinned.size and (s._balance is not None or self.gathered_record is not None):
             # a vertex held where the contact holds it: its contact force is the support's reaction,
             # R = (M u - (f - memory)) at its normal dof, pushing the body out of the foundation
-            s.work.data = s.M * d.u.vec
-            dofs = d.normal_dofs[s.pinned]
-            residual = s.work.FV().NumPy()[dofs] - s._balance[dofs]
+            dofs = d.normal_dofs[pinned]
+            whole = self.gathered_record[0] if self.gathered_record is not None else self.record_vectors(t)[0]
+            residual = whole[dofs]
             if nodes.B is not None:  # P2: the forces of the adjacent facet midpoints act on the held vertex's dof too
                 residual = residual + (nodes.B.T @ nodes.lam)[dofs]
             reaction = -nodes.sign * residual
-            pressure[s.pinned] = reaction / nodes.vertex_weights[s.pinned]
+            pressure[pinned] = reaction / nodes.vertex_weights[pinned]
             layer = nodes.layer
-            state[s.pinned] = unilateral.STUCK if layer.g > 0 or layer.F > 0 else unilateral.RIGID
+            state[pinned] = unilateral.STUCK if layer.g > 0 or layer.F > 0 else unilateral.RIGID
         out = {"contact_pressure": pressure, "contact_state": state}
         if nodes.B is None:  # (P2: the facet midpoints carry most of the force; their own pressures are recorded)
             out["contact_pressure_recovered"] = d.pressure_recovery(pressure, nodes.vertex_weights)
         return out
+
+    def record_vectors(self, t: float) -> list:
+        """On a body that holds contact vertices: M u - (f - memory) of the last equilibrium, whose value at a held
+        vertex is the support's reaction (less the contact forces of P2's midpoints)."""
+        s = self.scheme
+        if s._balance is None:
+            return []
+        s.work.data = s.M * self.d.u.vec
+        return [s.work.FV().NumPy() - s._balance]
 
     def node_weights(self) -> np.ndarray:
         """Each contact vertex's share of the side as the pressures use it (P2: Simpson's, 1/6 of each facet)."""

@@ -110,7 +110,17 @@ class KelvinVoigtObserver(Observer):
     def _reaction(self, t: float, pinned: np.ndarray) -> np.ndarray:
         """The pressure at held contact vertices: the support's reaction (K_A v + K_G u - f at their normal dofs)
         over their share of the side."""
+        d = self.d
+        residual = self.gathered_record[0] if self.gathered_record is not None else self.record_vectors(t)[0]
+        force = residual[d.normal_dofs[pinned]]
+        return -d.geometry.normal_sign * force / d.node_weights[pinned]
+
+    def record_vectors(self, t: float) -> list:
+        """On a body that holds contact vertices: K_A v + K_G u - f, whose value at a held vertex is the support's
+        reaction."""
         d, m = self.d, self.d.model
+        if not d.geometry.pins_contact or d.side is None:
+            return []
         f, internal = d.u.vec.CreateVector(), d.u.vec.CreateVector()
         tmp, out = d.u.vec.CreateVector(), d.u.vec.CreateVector()
         d.load_vector(t, f)
@@ -119,6 +129,4 @@ class KelvinVoigtObserver(Observer):
             tmp.FV().NumPy()[:] = vector
             out.data = (d.viscous.mat if tensor is m.viscous else d.elastic.mat) * tmp
             internal.data += out
-        dofs = d.normal_dofs[pinned]
-        force = internal.FV().NumPy()[dofs] - f.FV().NumPy()[dofs]
-        return -d.geometry.normal_sign * force / d.node_weights[pinned]
+        return [internal.FV().NumPy() - f.FV().NumPy()]
