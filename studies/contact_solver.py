@@ -1,7 +1,7 @@
 """The contact solvers side by side: condensed (dense contact stiffness) against coupled (whole body, S never
 formed), on the same meshes, in one process, one thread each.
 
-    python studies/contact_solver.py [--out data/contact_solver] [--big] [--slope]
+    python studies/contact_solver.py [--out data/contact_solver] [--big] [--slope] [--slope-cg]
 
 Per case and solver: dofs, contact points, steps, wall time of ``workbench.run`` (the mesh made once beforehand, so
 both pay the same), the setup time, back-substitutions (``linear_solves``), active-set and conjugate gradient
@@ -10,7 +10,9 @@ cost of assembling and factoring K alone (NGSolve's sparse Cholesky, the yardsti
 hemisphere at h_contact = 0.005 (47k dofs, 5186 contact vertices), coupled only (condensed: 783 s, measured before,
 ``data/hertz/hertz3d_fine.csv``). Writes ``summary.csv`` and prints the table of docs/schemes.md. ``--slope`` (alone):
 the cost of a step of the coupled solver against the dofs at three sizes of the block and of the hemisphere, the time
-loop's wall time over its steps, and the least-squares slope in log-log (``slope.csv``).
+loop's wall time over its steps, and the least-squares slope in log-log (``slope.csv``). ``--slope-cg`` (alone): the
+same for ``memory_block`` to T = 0.3 at four sizes (4k to 78k dofs), with the sparse factor (``solver = "auto"``) and
+with AMG-preconditioned conjugate gradients (``solver = "cg"``), side by side (``slope_cg.csv``; about 12 minutes).
 """
 from __future__ import annotations
 
@@ -71,9 +73,15 @@ SLOPE = [("memory_block", [dict(h=0.1), dict(h=0.07), dict(h=0.05)]),
          ("memory_hertz3d", [dict(h_contact=0.02), dict(h_contact=0.01), dict(h_contact=0.005)])]
 
 
-def slope(rows) -> None:
-    """The time loop's cost per step (coupled solver, one thread) against the dofs, and its log-log slope."""
-    for name, sizes in SLOPE:
+SLOPE_CG = [(f"memory_block, solver = {solver}", "memory_block", [dict(h=h, T=0.3, solver=solver)
+                                                                   for h in (0.1, 0.07, 0.05, 0.035)])
+            for solver in ("auto", "cg")]
+
+
+def slope(rows, cases=None) -> None:
+    """The time loop's cost per step (coupled solver, one thread) against the dofs, and its log-log slope (over all
+    sizes, and ``slope_last`` over the last two)."""
+    for label, name, sizes in cases or [(name, name, sizes) for name, sizes in SLOPE]:
         mine = []
         for overrides in sizes:
             row, ds = one(name, overrides, "coupled")
@@ -83,10 +91,12 @@ def slope(rows) -> None:
             mine.append(row)
             print(row, flush=True)
         fit = np.polyfit(np.log([r["ndof"] for r in mine]), np.log([r["per_step"] for r in mine]), 1)[0]
+        last = np.log(mine[-1]["per_step"] / mine[-2]["per_step"]) / np.log(mine[-1]["ndof"] / mine[-2]["ndof"])
         for r in mine:
-            r["slope"] = round(float(fit), 3)
+            r["slope"], r["slope_last"] = round(float(fit), 3), round(float(last), 3)
         rows.extend(mine)
-        print(name, "slope of the cost of a step against the dofs", round(float(fit), 3), flush=True)
+        print(label, "slope of the cost of a step against the dofs", round(float(fit), 3), "(last two sizes",
+              round(float(last), 3), ")", flush=True)
 
 
 def table(rows) -> str:
@@ -111,15 +121,16 @@ def main():
     p.add_argument("--out", default="data/contact_solver")
     p.add_argument("--big", action="store_true")
     p.add_argument("--slope", action="store_true", help="only the cost of a step against the dofs (slope.csv)")
+    p.add_argument("--slope-cg", action="store_true", help="the same, factor against CG (slope_cg.csv)")
     args = p.parse_args()
     out = Path(args.out)
     out.mkdir(parents=True, exist_ok=True)
     rows = []
-    if args.slope:
+    if args.slope or args.slope_cg:
         with threadpool_limits(1):
             workbench.run("memory_slab", h=0.5, k=0.5, progress=False)  # (warm-up)
-            slope(rows)
-        with open(out / "slope.csv", "w", newline="") as f:
+            slope(rows, SLOPE_CG if args.slope_cg else None)
+        with open(out / ("slope_cg.csv" if args.slope_cg else "slope.csv"), "w", newline="") as f:
             w = csv.DictWriter(f, fieldnames=list(rows[-1]))
             w.writeheader()
             w.writerows(rows)
