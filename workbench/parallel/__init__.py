@@ -26,14 +26,14 @@ Rank 0 also keeps a serial view of the body (:mod:`.order`): the archive, which 
 has the serial run's layout and numbers to the solver's tolerance (tests/test_parallel.py).
 
 What runs: the schemes registered as ``distributed`` (:data:`workbench.input.numerics.SCHEMES`: all of
-them), at fixed steps, P1 or P2, in 2D and 3D (the Hertz bodies' held apex: its reaction is summed over the
-ranks and gathered to rank 0 at each record, :meth:`workbench.schemes.base.Observer.record_vectors`);
-the archive, its plot and its VTK files are rank 0's. The implicit schemes solve their step operator
-like K_A and their contact problem on rank 0's serial view, the other ranks serving its solves
-(:mod:`.contact`). Refused by name before any work (:func:`check`): error-controlled steps, adaptive
-meshes, the rod, higher orders, the banded and umfpack solvers. Restarts and checkpoints hold the state in the serial order, so a distributed run's
-archive goes on with one process or with another number of ranks, and a one-process archive on
-several.
+them), with fixed or error-controlled steps, P1 or P2, in 2D and 3D; the Hertz bodies' held apex too (its
+reaction is summed over the ranks and gathered to rank 0 at each record,
+:meth:`workbench.schemes.base.Observer.record_vectors`). The archive, its plot and its VTK files are rank 0's.
+The implicit schemes solve their step operator like K_A and their contact problem on rank 0's serial view, the
+other ranks serving its solves (:mod:`.contact`). Refused by name before any work (:func:`check`): adaptive
+meshes, the rod, higher orders, the banded and umfpack solvers. Restarts and checkpoints hold the state in the
+serial order, so a distributed run's archive goes on with one process or with another number of ranks, and a
+one-process archive on several.
 
 Started without a launcher (or with one process) :func:`world` is :data:`workbench.discrete.world.SERIAL`
 and :func:`discretise` builds the one-process discretisation.
@@ -80,6 +80,9 @@ class World(Serial):
 
     def bcast(self, obj):
         return self.comm.bcast(obj, root=0)
+
+    def allgather(self, obj) -> list:
+        return self.comm.allgather(obj)
 
 
 @functools.lru_cache(maxsize=None)
@@ -133,8 +136,6 @@ def check(scene, model, numerics) -> None:
                "orders depend on the edges' orientation on each rank)")
     elif numerics.space_tol > 0:
         why = f"space_tol = {numerics.space_tol:g}: adaptive refinement runs on one process"
-    elif numerics.adaptive:
-        why = f"rtol = {numerics.rtol:g}: error-controlled steps run on one process (fixed steps: rtol = 0)"
     if why:
         raise ParameterError(f"{scene.name} on {w.size} MPI processes: {why}; run it with one process")
 

@@ -259,6 +259,11 @@ class GatheringRecorder:
         if self.w.root:
             self.recorder.take(t, *due, control=control)
 
+    @property
+    def extra(self) -> dict:
+        """The scalar records by name (rank 0's; the others keep none)."""
+        return self.recorder.extra if self.recorder is not None else {}
+
     def dataset(self, attrs: dict):
         """The Dataset (on rank 0)."""
         return self.recorder.dataset(attrs)

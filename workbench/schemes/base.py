@@ -86,6 +86,8 @@ from functools import cached_property
 
 import numpy as np
 
+from ..discrete.world import SERIAL
+
 
 class Scheme:
     """The stepper (module docs) with its defaults."""
@@ -239,16 +241,17 @@ class ErrorControlled:
 
     def scaled_difference(self, u_other, beta_other, rtol: float, atol: float) -> float:
         """The norm of error control (:meth:`local_error`) of the current state minus another (u, beta)."""
-        u = self.d.u.vec.FV().NumPy()
+        u, world = self.d.u.vec.FV().NumPy(), self.d.world
         free = self._free
         e = (u[free] - u_other[free]) if free is not None else (u - u_other)
-        err = np.abs(e).max() / (atol + rtol * max(self.u_scale, np.abs(u).max()))
+        err = world.max(np.abs(e).max(initial=0.0)) / (atol + rtol * max(self.u_scale,
+                                                                            world.max(np.abs(u).max(initial=0.0))))
         beta = self._beta()
         if beta is not None:  # beta is of order 1: relative to rtol
             w = self.d.rate_side.weights
             eb = np.zeros(len(beta))
             eb[self.d.rate_side.element] = w  # facet measures in facet order
-            err = max(err, np.sqrt(np.sum(eb * (beta - beta_other) ** 2) / np.sum(eb)) / rtol)
+            err = max(err, np.sqrt(world.sum(np.sum(eb * (beta - beta_other) ** 2)) / world.sum(np.sum(eb))) / rtol)
         return float(err)
 
     @cached_property
@@ -323,12 +326,13 @@ class Observer:
 EVENT_FRACTION = 0.25
 
 
-def first_crossing(before: np.ndarray, after: np.ndarray, weights=None, fraction: float = 0.0):
+def first_crossing(before: np.ndarray, after: np.ndarray, weights=None, fraction: float = 0.0, world=SERIAL):
     """The smallest theta in (0, 1] at which linear paths from ``before`` to ``after`` cross zero (None: none).
 
     Entries that start exactly at 0 (on the kink already) do not count. With ``weights``,
     the theta at which the crossings (taken in order) first add up to ``fraction`` of the
-    total weight (None when they never do).
+    total weight (None when they never do). On several processes (``world``) each holds some of the entries:
+    the crossings of all are gathered on every process, so all take the same theta.
 
     >>> first_crossing(np.array([1.0, -2.0, 3.0]), np.array([-1.0, -1.0, 1.0]))
     0.5
@@ -336,33 +340,37 @@ def first_crossing(before: np.ndarray, after: np.ndarray, weights=None, fraction
     0.5
     """
     crossed = (before * after < 0) | ((after == 0) & (before != 0))
-    if not crossed.any():
+    if not world.any(crossed.any()):
         return None
     b, a = before[crossed], after[crossed]
-    theta = b / (b - a)
+    theta = np.concatenate(world.allgather(b / (b - a)))
     if weights is None:
         return float(np.min(theta))
-    order = np.argsort(theta)
-    reached = np.cumsum(np.asarray(weights)[crossed][order]) >= fraction * np.sum(weights) * (1 - 1e-12)
+    w = np.concatenate(world.allgather(np.asarray(weights)[crossed]))
+    order = np.argsort(theta, kind="stable")
+    reached = np.cumsum(w[order]) >= fraction * world.sum(np.sum(weights)) * (1 - 1e-12)
     return float(theta[order][np.argmax(reached)]) if reached.any() else None
 
 
-def first_event(before, after):
-    """The earliest event over groups of switching functions: lists of (values, weights) at the step's start and end."""
-    thetas = [first_crossing(b, a, w, EVENT_FRACTION) for (b, w), (a, _) in zip(before, after) if b.size]
+def first_event(before, after, world=SERIAL):
+    """The earliest event over groups of switching functions: lists of (values, weights) at the step's start and end
+    (on several processes, ``world``: each process's part of every group)."""
+    thetas = [first_crossing(b, a, w, EVENT_FRACTION, world) for (b, w), (a, _) in zip(before, after)]
     thetas = [x for x in thetas if x is not None]
     return min(thetas) if thetas else None
 
 
-def crossed_fraction(before, after) -> float:
-    """The largest share (by weight) of one group of switching functions that changed sign over the step (0: none).
+def crossed_fraction(before, after, world=SERIAL) -> float:
+    """The largest share (by weight) of one group of switching functions that changed sign over the step (0: none;
+    on several processes, ``world``: each process's part of every group).
 
     >>> crossed_fraction([(np.array([1.0, 1.0, 1.0, 1.0]), np.ones(4))], [(np.array([-1.0, 1.0, 1.0, 1.0]), None)])
     0.25
     """
     out = 0.0
     for (b, w), (a, _) in zip(before, after):
-        if b.size:
-            crossed = (b * a < 0) | ((a == 0) & (b != 0))
-            out = max(out, float(np.sum(w[crossed]) / np.sum(w)))
+        crossed = (b * a < 0) | ((a == 0) & (b != 0))
+        total = world.sum(float(np.sum(w)))
+        if total > 0:
+            out = max(out, world.sum(float(np.sum(w[crossed]))) / total)
     return out

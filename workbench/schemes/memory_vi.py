@@ -276,16 +276,20 @@ class MemoryVI(ErrorControlled, Scheme):
         force[d.dirichlet_dofs] = 0.0
         du = np.zeros(d.ndof)
         self.solver.solve(force, du)
-        return float(np.abs(du).max() / (atol + rtol * max(self.u_scale, np.abs(u).max())))
+        world = d.world
+        return float(world.max(np.abs(du).max(initial=0.0)) / (atol + rtol * max(self.u_scale,
+                                                                                 world.max(np.abs(u).max(initial=0.0)))))
 
     def event(self, start: dict):
         """Where to land on a state change; the crossed share is 0: the estimate (a pair of memory rules) does
         not see the kinks of u."""
-        nodes = self.nodes
-        if not nodes.size:
+        nodes, x = self.nodes, self.exchange
+        if not self.size:
             return None, 0.0
-        return first_event(nodes.kinks(start["u"], start["extra"]["lam"]),
-                           nodes.kinks(self.d.u.vec.FV().NumPy(), nodes.lam)), 0.0
+        before, after = x.gather(start["u"]), x.gather(self.d.u.vec.FV().NumPy())  # (where the contact points are)
+        theta = first_event(nodes.kinks(before, start["extra"]["lam"]), nodes.kinks(after, nodes.lam)) \
+            if x.solves else None
+        return x.share(theta), 0.0
 
     def _extra_state(self) -> dict:
         memory = self.memory.state() if self.memory is not None else {"histories": []}

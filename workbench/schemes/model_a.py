@@ -77,7 +77,7 @@ def kink_event(d, start: dict, beta) -> tuple:
     """(theta, crossed) of the step from the state ``start`` to the current one (:meth:`ErrorControlled.event`)."""
     before = kinks(d, start["u"], start["beta"])
     after = kinks(d, d.u.vec.FV().NumPy(), beta)
-    return first_event(before, after), crossed_fraction(before, after)
+    return first_event(before, after, d.world), crossed_fraction(before, after, d.world)
 
 
 class KelvinVoigtObserver(Observer):
