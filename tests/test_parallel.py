@@ -91,7 +91,7 @@ def test_a_distributed_run_equals_the_serial_run(tmp_path, n, scene, values):
 #: condense the contact problem (the defaults on one process); the distributed ones solve it on rank 0's serial view
 #: with the coupled solver, each back-substitution a CG solve over the ranks (or, last case, the gathered factor and
 #: the condensed solver).
-IMPLICIT = [(3, "block", dict(BLOCK, scheme="bdf2")),
+IMPLICIT = [(3, "block", dict(BLOCK, scheme="bdf2", T=0.1)),
             (2, "tp4", dict(h=0.1, order=2, T=0.1, k=0.01, scheme="implicit")),
             (3, "memory_block", dict(h=0.25, snapshots=(0.5, 1.0))),
             (2, "memory_slab", dict(h=0.25, order=2, solver="sparsecholesky", contact_solver="condensed",
