@@ -43,6 +43,7 @@ from __future__ import annotations
 import functools
 import sys
 import time
+import warnings
 
 import numpy as np
 
@@ -146,7 +147,6 @@ def check(scene, model, numerics) -> None:
         raise ParameterError(f"{scene.name} on {w.size} MPI processes: {why}; run it with one process")
     if w.size > TESTED_PROCESSES and numerics.solver in ("auto", "cg") and w.root:
         import ngsolve
-        import warnings
 
         warnings.warn(f"{w.size} MPI processes with solver = 'cg': NGSolve's parallel conjugate gradients (NGSolve "
                       f"{ngsolve.__version__} here) aborted with heap corruption ('malloc(): unaligned tcache chunk') "
