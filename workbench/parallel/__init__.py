@@ -150,8 +150,9 @@ def check(scene, model, numerics) -> None:
 
         warnings.warn(f"{w.size} MPI processes with solver = 'cg': NGSolve's parallel conjugate gradients (NGSolve "
                       f"{ngsolve.__version__} here) aborted with heap corruption ('malloc(): unaligned tcache chunk') "
-                      f"on 4 and 5 processes on the reference machine, also in a plain NGSolve script; "
-                      f"{TESTED_PROCESSES} processes or fewer are tested, and solver = 'sparsecholesky' ran on 4",
+                      f"on 4 and 5 processes on the reference machine, also in a plain NGSolve script "
+                      f"(studies/mpi_plain_ngsolve.py); {TESTED_PROCESSES} processes or fewer are tested, and "
+                      f"solver = 'sparsecholesky' ran on 4",
                       RuntimeWarning, stacklevel=3)
 
 
