@@ -252,8 +252,9 @@ class GatheringRecorder:
                 vectors = [shell.dofs.gather(v[shell.local_dofs]) for v in self.observer.snapshot_vectors()]
                 if self.w.root:
                     self.recorder.observer.gathered = vectors
-            work = shell.local.u.vec.CreateVector()  # (each rank's part of a sum, summed over the ranks first)
-            vectors = [shell.dofs.gather(cumulate(work, v)[shell.local_dofs]) for v in self.observer.record_vectors(t)]
+            parts = self.observer.record_vectors(t)  # (each rank's part of a sum: summed over the ranks first)
+            work = shell.local.u.vec.CreateVector() if parts else None
+            vectors = [shell.dofs.gather(cumulate(work, v)[shell.local_dofs]) for v in parts]
             if self.w.root:
                 self.recorder.observer.gathered_record = vectors or None
         if self.w.root:
