@@ -106,9 +106,11 @@ class ContactNodes:
         force[self.C] = self.sign * lam  # contact forces on the body, in dof direction: -(outward) ...
         return force
 
-    def solve(self, S_inv, rho, s_free: np.ndarray, time: float):
+    def solve(self, S_inv, rho, s_free: np.ndarray, time: float, u=None):
         """(s, lam, iterations) of the condensed inequality for the contact-free displacement ``s_free`` at the points
-        (its distance, g0 taken off), by the primal-dual active set from the previous step's states (module docs)."""
+        (its distance, g0 taken off), by the primal-dual active set from the previous step's states (module docs).
+        ``u``: the displacement the step starts from (a dof vector; default: the discretisation's), where projected
+        Gauss-Seidel starts should the states cycle."""
         layer = self.layer
         rho_t = rho * self.w  # rho in traction units: z = s + rho_t * lam / w
         states = self.states.copy()
@@ -128,18 +130,18 @@ class ContactNodes:
                 seen.add(key)
                 states = new
             if attempt == 0:
-                states = self._gauss_seidel_states(S_inv, rho, s_free)
+                states = self._gauss_seidel_states(S_inv, rho, s_free, u)
         raise NewtonFailed(f"{self.d.scene.name}: the contact active-set iteration did not settle ({total} iterations) "
                            f"at t = {time:.6g} s; try a smaller k", time=time)
 
-    def _gauss_seidel_states(self, S, rho_diag, s_free, sweeps=2000, tol=1e-13):
+    def _gauss_seidel_states(self, S, rho_diag, s_free, u=None, sweeps=2000, tol=1e-13):
         """States of the condensed energy's minimiser by projected Gauss-Seidel (exact coordinate minimisation)."""
         w = self.w
         b = S @ s_free
         diag = np.diag(S)
         rho = w / diag  # coordinate i: minimise (S_ii / 2) s^2 - y S_ii s + w psi(s) over s <= g -> prox
         layer = self.layer
-        s = np.minimum(self.distance(self.d.u.vec.FV().NumPy()), layer.g)
+        s = np.minimum(self.distance(self.d.u.vec.FV().NumPy() if u is None else u), layer.g)
         for _ in range(sweeps):
             change = 0.0
             for i in range(len(s)):

@@ -56,9 +56,9 @@ class CoupledActiveSet:
         self.linear_iterations = 0
         self.memory = KrylovMemory()
 
-    def solve(self, schur, rho, s_free: np.ndarray, time: float, fallback):
-        """(s, lam, iterations) as :meth:`ContactNodes.solve`; ``fallback()`` returns the condensed (S_inv, rho) when
-        the states cycle."""
+    def solve(self, schur, rho, s_free: np.ndarray, time: float, fallback, u=None):
+        """(s, lam, iterations) as :meth:`ContactNodes.solve` (``u`` as there); ``fallback()`` returns the condensed
+        (S_inv, rho) when the states cycle."""
         nodes = self.nodes
         self.linear_iterations = 0
         total = 0
@@ -67,7 +67,7 @@ class CoupledActiveSet:
             if found is not None:
                 return found
         S_inv, rho_dense = fallback()
-        s, lam, more = nodes.solve(S_inv, rho_dense, s_free, time)
+        s, lam, more = nodes.solve(S_inv, rho_dense, s_free, time, u)
         return s, lam, total + more
 
     def _active_set(self, schur, rho, s_free, time, total):

@@ -193,8 +193,8 @@ class MemoryVI(ErrorControlled, Scheme):
         if d.moves_clamp:
             self.z[d.dirichlet_dofs] = d.dirichlet_value(time)
         if self.size:
-            z = x.gather(self.z)
-            found = x.run(lambda: self._contact(z, time), self.solver)
+            z, start = x.gather(self.z), x.gather(u)
+            found = x.run(lambda: self._contact(z, time, start), self.solver)
             out = np.zeros(d.ndof)
             self.solver.solve(x.spread(found[0] if x.solves else None), out)
             u[:] = self.z - out
@@ -206,19 +206,20 @@ class MemoryVI(ErrorControlled, Scheme):
         if x.solves:
             self.diag = self._diagnostics(u_view, found[2] if self.size else None)
 
-    def _contact(self, z: np.ndarray, time: float):
-        """Where the contact problem is solved, from the contact-free displacement ``z`` (a vector of the view): (the
+    def _contact(self, z: np.ndarray, time: float, start: np.ndarray):
+        """Where the contact problem is solved, from the contact-free displacement ``z`` and the step's start ``start``
+        (vectors of the view; the start only for the fallback of a cycling active set): (the
         contact forces as a dof vector of the view, the view's u at the contact dofs where the constraint fixes it
         (else ``z`` there, kept), (the active-set iterations, the back-substitutions))."""
         nodes, solves = self.nodes, 0
         if self.coupled is not None:
             before = self.schur.applications
             s, lam, iterations = self.coupled.solve(self.schur, self.rho, nodes.distance(z), time,
-                                                    self._condensed_fallback)
+                                                    self._condensed_fallback, start)
             # (linear_solves adds the iterations: each back-substitution of the solve counted once)
             solves = self.schur.applications - before - iterations
         else:
-            s, lam, iterations = nodes.solve(self.S_inv, self.rho, nodes.distance(z), time)
+            s, lam, iterations = nodes.solve(self.S_inv, self.rho, nodes.distance(z), time, start)
         if nodes.g0 is not None:  # (the layer's law acts on the distance to the foundation)
             s = s + nodes.g0
         fixed = None
