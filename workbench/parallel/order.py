@@ -141,8 +141,8 @@ class Shell:
             if key in state["extra"] and where != "root" and not _none(state["extra"][key]):  # (root: held in the
                 # serial order on rank 0 already)
                 out["extra"][key] = self._gathered(where, np.asarray(state["extra"][key]))
-        out["history"] = [(t, self.dofs.gather(np.asarray(u)[self.local_dofs]),
-                           None if b is None else self.facets.gather(b)) for t, u, b in state["history"]]
+        out["history"] = [(t, self._gathered("dof", np.asarray(u)), None if b is None else self.facets.gather(b))
+                          for t, u, b in state["history"]]
         return out if self.w.root else None
 
     def local_state(self, state: dict, layout: dict) -> dict:
@@ -156,12 +156,14 @@ class Shell:
         out["extra"] = dict(state["extra"])
         for key, where in layout.items():
             if key in state["extra"] and where != "root" and not _none(state["extra"][key]):
-                value = np.asarray(state["extra"][key])
-                if where == "dof":
-                    value = np.array([self._local_dofs(row) for row in value]) if value.ndim == 2 else \
-                        self._local_dofs(value)
-                out["extra"][key] = value if where == "dof" else self._order(where).pick(value)
+                out["extra"][key] = self._picked(where, np.asarray(state["extra"][key]))
         return out
+
+    def _picked(self, where: str, value: np.ndarray) -> np.ndarray:
+        """This rank's part of an array of a scheme's state in the serial order (a 2D array: per row)."""
+        if value.ndim == 2:
+            return np.array([self._picked(where, row) for row in value])
+        return self._local_dofs(value) if where == "dof" else self._order(where).pick(value)
 
     def _gathered(self, where: str, value: np.ndarray):
         """An array of a scheme's state (per local dof or per point; a 2D array: per row) in the serial order, on
