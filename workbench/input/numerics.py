@@ -56,7 +56,7 @@ TIME = ("k", "scheme", "solver", "contact_solver")
 #: Error-controlled steps (``rtol > 0``): the tolerances and the bounds of the step.
 CONTROL = ("rtol", "atol", "k_min", "k_max")
 #: Adaptive refinement in space (``space_tol > 0``): the tolerance of the estimate and the bound of the mesh.
-ADAPT = ("space_tol", "max_dofs", "space_adapt")
+ADAPT = ("space_tol", "max_dofs", "space_adapt", "space_goal")
 #: The explicit scheme's stability override.
 EXPLICIT = ("allow_unstable",)
 #: Model B: the rule of the memory integral and the approximation of a general kernel.
@@ -129,6 +129,7 @@ class Numerics:
     space_tol: float = 0.0
     max_dofs: int = 200000
     space_adapt: str = "repeat"
+    space_goal: str = "energy"
     threads: int | None = None
 
     @property

@@ -72,6 +72,10 @@ _TABLE: dict[str, Param] = {p.name: p for p in [
     _p("space_adapt", "repeat", "", "how the mesh is adapted (space_tol > 0): 'repeat' = the whole run repeated on "
        "each finer mesh (one mesh for the whole history), 'during' = refined during the run where the estimate asks, "
        "the state carried onto the finer mesh (implicit, bdf2, vi)", "choice", choices=("repeat", "during")),
+    _p("space_goal", "energy", "", "what adaptive refinement (space_tol > 0) aims at: 'energy' = the error in the "
+       "energy norm, 'pressure' = the contact pressure (each element's energy indicator weighted by a dual problem's: "
+       "the body held where it presses, moved by the pressure's shape there); the tolerance stays the energy's",
+       "choice", choices=("energy", "pressure")),
     _p("allow_unstable", False, "", "run the explicit scheme even when k exceeds its predicted stability limit",
        "flag"),
     _p("solver", "auto", "", "linear solver for the constant matrix: banded Cholesky (RCM order), NGSolve's "

@@ -7,7 +7,9 @@ T: ``runner.ESTIMATE_SPACING``), each element keeps the largest
 indicator it had over the run, and the elements that carry the share ``DORFLER`` of the sum of those are bisected
 (Dörfler marking; netgen keeps the curved sides on their geometry). So the final mesh is fine wherever the solution
 needed it at any time (the edge of a contact zone at all its radii), and the run on it is an ordinary run, with no
-transfer of state between meshes. It stops when the largest relative estimate over the run is at most
+transfer of state between meshes. With ``space_goal = "pressure"`` the marked quantity is each element's largest
+eta_K(u) eta_K(z) over the run, z the dual problem of the contact pressure
+(:class:`workbench.discrete.estimator.PressureGoal`); the tolerance is still the energy estimate's. It stops when the largest relative estimate over the run is at most
 ``space_tol``, or when refining again would exceed ``max_dofs`` dofs, or after ``MAX_LEVELS`` meshes.
 
 The Dataset is the run on the final mesh, with ``space_error_estimate(time)``, ``ndof(time)``, the meshes' history
@@ -103,7 +105,7 @@ def run(make_job, model, numerics, execute_args: tuple):
         stop = _stop(levels, numerics)
         if stop:
             break
-        geometry = refined(model.geometry, ds)
+        geometry = on_mesh(model.geometry, refine(model.geometry.mesh(), mark(job.marked)))
         if displacement_dofs(geometry.adapted_mesh, geometry, numerics.order) > numerics.max_dofs:
             stop = "max_dofs"
             break

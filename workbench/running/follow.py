@@ -136,10 +136,11 @@ class Follow:
             return
         if self.full or not self.too_large(estimate, displacement):
             return
-        self.refine(estimate.indicators, body, mesh)
+        self.refine(estimate.marking, body, mesh)
 
     def refine(self, indicators, body, mesh) -> None:
-        """The finer body (``geometry``) by Dörfler marking of ``indicators``, unless it would exceed max_dofs."""
+        """The finer body (``geometry``) by Dörfler marking of ``indicators`` (an estimate's ``marking``), unless it
+        would exceed max_dofs."""
         # (through the archive's text of the mesh, whose coordinates differ by an ulp: a continuation then reads the
         # very mesh the run went on with, and is bitwise the run straight through)
         finer = on_mesh(body, from_text(to_text(adapt.refine(mesh, adapt.mark(indicators)))))
@@ -287,7 +288,7 @@ def _first_pass(make_job, model, follow: Follow, execute_args: tuple):
     failed = [i for i, (e, displacement, _, _) in enumerate(follow.seen) if follow.too_large(e, displacement)]
     if failed:
         estimate, _, body, mesh = follow.seen[failed[0]]
-        follow.refine(estimate.indicators, body, mesh)
+        follow.refine(estimate.marking, body, mesh)
     saved = follow.kept[failed[0] - 1] if failed and failed[0] > 0 else None
     follow.seen, follow.kept = [], []
     if follow.geometry is None:

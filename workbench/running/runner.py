@@ -293,7 +293,8 @@ class _Run:
         self.sc, self.model, self.numerics, self.world, self.call = sc, model, numerics, world, call
         self.resume, self.checkpoint, self.progress = resume, checkpoint, progress
         self.failed_checkpoint = None
-        self.estimator = self.indicators = None  # (space_tol > 0: the estimate in space, the largest per element)
+        # (space_tol > 0: the estimate in space; per element the largest indicator and what marking uses, over the run)
+        self.estimator = self.indicators = self.marking = None
         self.space_estimate, self.largest_norm = 0.0, 0.0
         self.follow = None  # (space_adapt = "during": refines the mesh at an estimate time, follow.Follow)
 
@@ -322,7 +323,7 @@ class _Run:
         if n.space_tol > 0:
             from ..discrete.estimator import Estimator
 
-            self.estimator = Estimator(disc, scheme.observer(disc))
+            self.estimator = Estimator(disc, scheme.observer(disc), goal=n.space_goal)
         if self.resume is not None:
             restarts.restore(self.resume.state_for(disc, scheme), disc, scheme, self.steps, self.recorder,
                              self.resume.archive)
@@ -382,9 +383,10 @@ class _Run:
             wanted, snapshot = recorder.due(t, final)
             if wanted and (final or snapshot or t - last[0] >= ESTIMATE_SPACING * self.sc["T"] * (1 - 1e-9)):
                 last[0] = t
-                e = self.estimator.evaluate(t)
-                self.indicators = e.indicators if self.indicators is None else np.maximum(self.indicators,
-                                                                                          e.indicators)
+                # (a goal is the pressure the archive shows, at the snapshots and T; a mesh that follows the solution
+                # refines at any estimate time, for that time's)
+                e = self.estimator.evaluate(t, goal=bool(final or snapshot or self.follow is not None))
+                self._keep(e)
                 self.space_estimate, self.largest_norm = max(self.space_estimate, e.total), max(self.largest_norm, e.norm)
                 control = (control or {}) | {"space_error_estimate": e.total}  # (made relative by adapt.run)
                 if self.follow is not None:
@@ -395,6 +397,18 @@ class _Run:
                 self._follow(t)
 
         return observe
+
+    def _keep(self, e) -> None:
+        """Each element's largest indicator over the run, and what marking uses: with a goal, the largest of the
+        goal's products over the times that have them (a product is not an indicator: the two are not mixed)."""
+        self.indicators = e.indicators if self.indicators is None else np.maximum(self.indicators, e.indicators)
+        if e.weights is not None:
+            self.marking = e.marking if self.marking is None else np.maximum(self.marking, e.marking)
+
+    @property
+    def marked(self) -> np.ndarray:
+        """What the run's marking uses (:meth:`_keep`): the goal's products, or without them the indicators."""
+        return self.marking if self.marking is not None else self.indicators
 
     def _after_step(self):
         """The checkpoint writer the loop calls after each accepted step (None without checkpoints)."""
