@@ -1,6 +1,6 @@
 """Adaptive meshes against the built-in contact-zone refinement: the estimator's effectivity and what the dofs buy.
 
-    python studies/adaptivity.py [--levels 7] [--three-d LEVELS] [--lee-radok] [--during] [--balance]
+    python studies/adaptivity.py [--levels 7] [--three-d LEVELS] [--lee-radok] [--during] [--balance] [--goal]
                                  [--out data/adaptivity]
 
 For ``memory_hertz`` (2D Signorini Hertz) it follows the adaptive loop of ``space_tol > 0`` level by level (the same
@@ -16,7 +16,9 @@ zones against space_tol (``lee_radok.csv``). ``--during`` (alone): the mesh refi
 (``space_adapt = "during"``) against the repeated runs on the tp4 slab, the 2D Hertz and Lee and Radok's Hertz, and the
 transfer error of the carried state on the curved half-disc (``during.csv``). ``--balance`` (alone): tp4 with
 error-controlled BDF2 steps and a mesh refined during the run, space_tol against rtol, the energy error at T against
-a finer run in both (``balance.csv``). Writes ``adaptivity.csv``, ``adaptivity_mesh.png`` (the final 2D mesh, whole and at the contact zone)
+a finer run in both (``balance.csv``). ``--goal`` (alone, or with ``--three-d 1`` for the hemisphere): refinement
+aimed at the pressure (``space_goal = "pressure"``) against the energy's, the pressure's errors against the dofs
+(``goal.csv``, ``goal_3d.csv``). Writes ``adaptivity.csv``, ``adaptivity_mesh.png`` (the final 2D mesh, whole and at the contact zone)
 and prints the tables of docs/adaptivity.md. One thread.
 """
 from __future__ import annotations
@@ -188,6 +190,43 @@ def balance(rows):
         print(row, flush=True)
 
 
+def goal(rows, three_d: bool):
+    """Refinement aimed at the pressure (``space_goal = "pressure"``) against the energy's and the built-in zone: the
+    Hertz pressure's L2 errors against the dofs. One adaptive loop per max_dofs (the loop is deterministic: each ends
+    on a mesh of the same sequence). 2D from h_contact = 0.01; 3D from the scene's mesh. Lee and Radok's radius along
+    the same lines for the goal (the energy's rows are ``lee_radok.csv``'s)."""
+    cases = [("memory_hertz", dict(h_contact=0.01), (700, 1500, 3000, 6000, 12000, 24000))]
+    if three_d:
+        cases = [("memory_hertz3d", {}, (5000, 20000, 70000))]
+    for name, kw, bounds in cases:
+        for aim in ("energy", "pressure"):
+            last = None
+            for bound in bounds:
+                t0 = time.perf_counter()
+                with warnings.catch_warnings():
+                    warnings.simplefilter("ignore", RuntimeWarning)
+                    ds = workbench.run(name, **kw, space_tol=0.001, max_dofs=bound, space_goal=aim, progress=False)
+                if ds.attrs["ndof"] == last:  # (the next mesh would have exceeded this bound too)
+                    continue
+                last = ds.attrs["ndof"]
+                rows.append(dict(case=name, mesh=f"space_goal={aim}", max_dofs=bound, ndof=ds.attrs["ndof"],
+                                 levels=ds.attrs["space_levels"], estimate=round(ds.attrs["space_error_estimate"], 4),
+                                 cost=round(time.perf_counter() - t0, 2), **pressure(ds)))
+                print(rows[-1], flush=True)
+    if not three_d:
+        base = dict(c_nu=1e8, tau=0.2, k=0.02, scheme="bdf2", snapshots=(), progress=False)
+        for tol in (0.05, 0.04, 0.03):
+            t0 = time.perf_counter()
+            with warnings.catch_warnings():
+                warnings.simplefilter("ignore", RuntimeWarning)
+                ds = workbench.run("hertz", **base, space_tol=tol, space_goal="pressure")
+            errors = radius_errors(ds)
+            rows.append(dict(case="hertz Lee-Radok", mesh=f"space_tol={tol} space_goal=pressure", ndof=ds.attrs["ndof"],
+                             cost=round(time.perf_counter() - t0, 2), radius_error_from_0_2=errors[0.2],
+                             radius_error_from_0_5=errors[0.5]))
+            print(rows[-1], flush=True)
+
+
 def radius_errors(ds):
     errors = {0.2: 0.0, 0.5: 0.0}
     for t in ds.time.values[1:]:
@@ -263,6 +302,8 @@ def main():
     parser.add_argument("--lee-radok", action="store_true", help="only the growing contact zone (lee_radok.csv)")
     parser.add_argument("--during", action="store_true", help="only the mesh refined during the run (during.csv)")
     parser.add_argument("--balance", action="store_true", help="only space_tol against rtol (balance.csv)")
+    parser.add_argument("--goal", action="store_true", help="only space_goal = 'pressure' against the energy's "
+                        "(goal.csv; with --three-d N, any N > 0: the hemisphere, goal_3d.csv)")
     parser.add_argument("--out", default="data/adaptivity")
     args = parser.parse_args()
     out = Path(args.out)
@@ -276,6 +317,10 @@ def main():
         with threadpool_limits(1):
             during(rows, out)
         return write(rows, out / "during.csv")
+    if args.goal:
+        with threadpool_limits(1):
+            goal(rows, args.three_d > 0)
+        return write(rows, out / ("goal_3d.csv" if args.three_d else "goal.csv"))
     if args.balance:
         with threadpool_limits(1):
             balance(rows)

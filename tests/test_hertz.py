@@ -5,7 +5,7 @@ workbench.references.hertz, exact formulas) and Lee and Radok's for a Kelvin-Voi
 energy of the boundary functional written here, independently of workbench.physics; the NGSolve form of j,
 whose initial gap is the coordinate function y (the fast path takes it from its own quadrature points).
 """
-import math
+import dataclasses
 
 import numpy as np
 import pytest
@@ -260,6 +260,64 @@ def test_recovered_pressure_keeps_a_uniform_pressure():
     np.testing.assert_allclose(d.pressure_recovery(p, w), 7.0, rtol=1e-13)
     p[0] = np.nan  # a clamped vertex stays unknown
     assert np.isnan(d.pressure_recovery(p, w)[0])
+
+
+def _graded_half_disc():
+    """The 2D Hertz body at h_contact = 0.01 with the elements near the apex bisected twice: facets of 0.0025 beside
+    facets of 0.005 and 0.01 along the contact side (the steps an adapted mesh has)."""
+    from workbench.input.geometry import on_mesh
+    from workbench.running import adapt
+
+    sc = workbench.scene("memory_hertz", h_contact=0.01)
+    body = sc.model_of().geometry
+    for radius in (0.08, 0.04):
+        mesh = body.mesh()
+        near = np.array([min(np.hypot(*mesh[v].point) for v in el.vertices) < radius for el in mesh.Elements()])
+        body = on_mesh(body, adapt.refine(mesh, near))
+    return discretisation.build(dataclasses.replace(sc.model_of(), geometry=body), sc)
+
+
+def _lumped(d, pressure):
+    """F_j / w_j for a pressure p(x) on the contact side, F_j = int p phi_j da by 4-point Gauss on each facet (not
+    by the hats' centroids the recovery uses), w_j = int phi_j da."""
+    index = {int(v): i for i, v in enumerate(d.vertex_numbers)}
+    F, w = np.zeros(len(index)), np.zeros(len(index))
+    s, g = np.polynomial.legendre.leggauss(4)
+    s, g = (s + 1) / 2, g / 2
+    for el in d.mesh.Boundaries(d.contact_name).Elements():
+        (a, b) = [np.array(d.mesh[v].point) for v in el.vertices]
+        ia, ib = (index[v.nr] for v in el.vertices)
+        length = np.linalg.norm(b - a)
+        x = a[0] + s * (b[0] - a[0])
+        F[ia] += length * np.sum(g * pressure(x) * (1 - s))
+        F[ib] += length * np.sum(g * pressure(x) * s)
+        w[ia] += length / 2
+        w[ib] += length / 2
+    return F / w, w
+
+
+def test_recovered_pressure_is_second_order_on_a_graded_contact_side():
+    """2D: a lumped pressure is the pressure's mean over its hat, at the vertex only to first order where the facets
+    beside it differ in size. The recovery's linear fit at the hats' centroids is exact for a linear pressure on the
+    graded side (every vertex it fits), and for Hertz's own profile its error is below a third of the patch
+    average's, which is first order there."""
+    from workbench.discrete.pressure import Recovery
+
+    d = _graded_half_disc()
+    x = d.node_xyz[:, 0]
+    lumped, w = _lumped(d, lambda x: 10.0 + 30.0 * x)
+    fitted, operator = d.pressure_recovery.fit
+    assert fitted.sum() > 0.8 * len(x)
+    np.testing.assert_allclose((operator @ lumped)[fitted], (10.0 + 30.0 * x)[fitted], rtol=1e-12)
+
+    a = 0.2  # (a smooth Hertz-like profile whose edge lies beyond the side: the fit everywhere but the ends)
+    profile = lambda x: 50.0 * np.sqrt(np.maximum(1.0 - (x / (2 * a)) ** 2, 0.0))  # noqa: E731
+    lumped, w = _lumped(d, profile)
+    averaged = Recovery(d.mesh, d.contact_name, d.vertex_numbers)(lumped, w)
+    inner = x < 0.25
+    err_fit = np.abs(d.pressure_recovery(lumped, w) - profile(x))[inner].max()
+    err_average = np.abs(averaged - profile(x))[inner].max()
+    assert err_fit < err_average / 3, (err_fit, err_average)
 
 
 def test_memory_hertz_default_mesh_meets_hertz_within_one_percent():
