@@ -252,3 +252,22 @@ def test_pressure_goal_does_not_chase_a_held_apex():
         ds = workbench.run("hertz", h_contact=0.01, T=0.5, space_tol=0.001, max_dofs=1200, space_goal="pressure",
                            progress=False)
     assert ds.attrs["space_stop"] == "max_dofs" and ds.attrs["space_levels"] <= 5, ds.level_ndof.values
+
+
+def test_pressure_goal_during_the_run():
+    """The mesh that follows the solution aims at the pressure too: each refinement marks that time's products. With
+    a tolerance it cannot meet, the run spends max_dofs at its first estimate time (t = 0.25, where it goes back to the
+    start each time); there the recovered pressure is closer to Hertz's than with the energy's marking (measured:
+    0.43 % at 3286 dofs against 2.08 % at 3512)."""
+    from workbench.references import hertz
+
+    def run(aim):
+        with warnings.catch_warnings():
+            warnings.simplefilter("ignore", RuntimeWarning)
+            return workbench.run("memory_hertz", h_contact=0.01, space_tol=0.001, max_dofs=4000, space_adapt="during",
+                                 space_goal=aim, progress=False)
+
+    energy, goal = run("energy"), run("pressure")
+    assert goal.sizes["refinement"] >= 3 and goal.attrs["ndof"] <= 4000
+    errors = [hertz.profile(ds, time=0.25, variable="contact_pressure_recovered")["l2"] for ds in (energy, goal)]
+    assert errors[1] < 0.5 * errors[0], errors
