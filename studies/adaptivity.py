@@ -17,8 +17,8 @@ zones against space_tol (``lee_radok.csv``). ``--during`` (alone): the mesh refi
 transfer error of the carried state on the curved half-disc (``during.csv``). ``--balance`` (alone): tp4 with
 error-controlled BDF2 steps and a mesh refined during the run, space_tol against rtol, the energy error at T against
 a finer run in both (``balance.csv``). ``--goal`` (alone, or with ``--three-d 1`` for the hemisphere): refinement
-aimed at the pressure (``space_goal = "pressure"``) against the energy's, the pressure's errors against the dofs
-(``goal.csv``, ``goal_3d.csv``). Writes ``adaptivity.csv``, ``adaptivity_mesh.png`` (the final 2D mesh, whole and at the contact zone)
+aimed at the pressure (``space_goal = "pressure"``) against the energy's, by bisection and by remeshing
+(``space_adapt = "remesh"``), the pressure's errors against the dofs (``goal.csv``, ``goal_3d.csv``). Writes ``adaptivity.csv``, ``adaptivity_mesh.png`` (the final 2D mesh, whole and at the contact zone)
 and prints the tables of docs/adaptivity.md. One thread.
 """
 from __future__ import annotations
@@ -191,26 +191,31 @@ def balance(rows):
 
 
 def goal(rows, three_d: bool):
-    """Refinement aimed at the pressure (``space_goal = "pressure"``) against the energy's and the built-in zone: the
-    Hertz pressure's L2 errors against the dofs. One adaptive loop per max_dofs (the loop is deterministic: each ends
-    on a mesh of the same sequence). 2D from h_contact = 0.01; 3D from the scene's mesh. Lee and Radok's radius along
+    """Refinement aimed at the pressure (``space_goal = "pressure"``) against the energy's and the built-in zone, by
+    bisection (``space_adapt = "repeat"``) and by meshes made anew (``"remesh"``): the Hertz pressure's L2 errors
+    against the dofs. One adaptive loop per max_dofs (the loop is deterministic: each ends on a mesh of the same
+    sequence). 2D from h_contact = 0.01; 3D from the scene's mesh. Lee and Radok's radius along
     the same lines for the goal (the energy's rows are ``lee_radok.csv``'s)."""
-    cases = [("memory_hertz", dict(h_contact=0.01), (700, 1500, 3000, 6000, 12000, 24000))]
+    cases = [("memory_hertz", dict(h_contact=0.01), "repeat", (700, 1500, 3000, 6000, 12000, 24000)),
+             ("memory_hertz", dict(h_contact=0.01), "remesh", (1000, 2000, 3000, 4000, 6000, 8000, 12000, 16000))]
     if three_d:
-        cases = [("memory_hertz3d", {}, (5000, 20000, 70000))]
-    for name, kw, bounds in cases:
+        cases = [("memory_hertz3d", {}, "repeat", (5000, 20000, 70000)),
+                 ("memory_hertz3d", {}, "remesh", (5000, 10000, 15000, 20000, 30000, 40000))]
+    for name, kw, mode, bounds in cases:
         for aim in ("energy", "pressure"):
             last = None
             for bound in bounds:
                 t0 = time.perf_counter()
                 with warnings.catch_warnings():
                     warnings.simplefilter("ignore", RuntimeWarning)
-                    ds = workbench.run(name, **kw, space_tol=0.001, max_dofs=bound, space_goal=aim, progress=False)
+                    ds = workbench.run(name, **kw, space_tol=0.001, max_dofs=bound, space_goal=aim, space_adapt=mode,
+                                       progress=False)
                 if ds.attrs["ndof"] == last:  # (the next mesh would have exceeded this bound too)
                     continue
                 last = ds.attrs["ndof"]
-                rows.append(dict(case=name, mesh=f"space_goal={aim}", max_dofs=bound, ndof=ds.attrs["ndof"],
-                                 levels=ds.attrs["space_levels"], estimate=round(ds.attrs["space_error_estimate"], 4),
+                rows.append(dict(case=name, mesh=f"space_adapt={mode} space_goal={aim}", max_dofs=bound,
+                                 ndof=ds.attrs["ndof"], levels=ds.attrs["space_levels"],
+                                 estimate=round(ds.attrs["space_error_estimate"], 4),
                                  cost=round(time.perf_counter() - t0, 2), **pressure(ds)))
                 print(rows[-1], flush=True)
     if not three_d:  # (the built-in zone on a finer ladder: which h_contact first reaches an error)

@@ -147,6 +147,9 @@ class Geometry:
     #: The radius of the refined zone of the curved contact side around its apex (a Hertz body), beyond which the
     #: side is free; None for a body whose whole contact side can touch.
     zone_radius = None
+    #: Whether the body can be meshed anew from its geometry with local element sizes (``space_adapt = "remesh"``:
+    #: :meth:`_Indenter.remeshed`); a box's structured mesh and a mesh file have no geometry to mesh again.
+    remeshable = False
 
     def tractions(self, values: dict) -> dict:
         """The traction expressions by boundary name (the scene's ``traction_SIDE`` values)."""
@@ -418,7 +421,7 @@ class _Indenter(Geometry):
     """
 
     extent_names, cell_names = ("radius",), ()
-    curved, pins_contact = True, True
+    curved, pins_contact, remeshable = True, True, True
 
     def __init__(self, h, cells=(), radius=1.0, h_contact=0.0, contact_zone=None):
         super().__init__(h, cells, radius=radius)
@@ -442,6 +445,24 @@ class _Indenter(Geometry):
         import ngsolve as ngs
 
         return ngs.Mesh(self._netgen().Copy())
+
+    def remeshed(self, points, sizes, grading: float) -> "Geometry":
+        """The body on a new mesh of its geometry whose element size near each of ``points`` (point, axis) is at most
+        its ``sizes``, and at most h everywhere (netgen grows the sizes between them by ``grading``): what
+        ``space_adapt = "remesh"`` makes of the estimate, finer or coarser than the mesh before, not nested in it.
+
+        Examples
+        --------
+        >>> import numpy as np, workbench
+        >>> body = workbench.scene("memory_hertz", h=0.2, h_contact=0.02).model_of().geometry
+        >>> m = body.remeshed([(0.0, 0.0)], [0.004], grading=0.3).mesh()  # (fine at the apex only)
+        >>> sorted(set(m.GetBoundaries())), m.ne < body.mesh().ne
+        (['axis', 'curved', 'flank', 'interface', 'top'], True)
+        >>> bool(min(np.linalg.norm(np.subtract(m[e.vertices[0]].point, m[e.vertices[1]].point)) for e in m.edges) < 0.005)
+        True
+        """
+        return on_mesh(self, _remeshed_indenter(self.kind, self.extent[0], self.h, self.contact_zone, points, sizes,
+                                                grading))
 
     def cells(self):
         return (self.n_cells(),)
@@ -555,19 +576,32 @@ def _indenter_mesh(kind, R, h, h_contact, contact_zone=CONTACT_ZONE):
 
 
 def _make_indenter_mesh(kind, R, h, h_contact, contact_zone):
+    return _indenter_geometry(kind, R, h_contact, contact_zone).GenerateMesh(maxh=h, grading=0.25)
+
+
+def _indenter_geometry(kind, R, h_contact, contact_zone):
+    """The OCC geometry of a Hertz body, its contact zone's sizes set for ``h_contact``, its apex named."""
     from netgen.occ import OCCGeometry
 
-    if kind == "halfdisc":
-        shape = _halfdisc_shape(R, h_contact, contact_zone)
-    else:
-        shape = _quarter_ball_shape(R, h_contact, contact_zone)
+    shape = (_halfdisc_shape if kind == "halfdisc" else _quarter_ball_shape)(R, h_contact, contact_zone)
     tol = 1e-9 * R
     for v in shape.vertices:
         p = v.p
         if abs(p.x) < tol and abs(p.y) < tol and abs(p.z) < tol:
             v.name = "apex"
-    geo = OCCGeometry(shape, dim=2) if kind == "halfdisc" else OCCGeometry(shape)
-    return geo.GenerateMesh(maxh=h, grading=0.25)
+    return OCCGeometry(shape, dim=2) if kind == "halfdisc" else OCCGeometry(shape)
+
+
+def _remeshed_indenter(kind, R, h, contact_zone, points, sizes, grading):
+    """The netgen mesh of a Hertz body at h with the local sizes ``sizes`` at ``points`` (no contact zone of its own:
+    its faces and the contact side take h, the sizes do the rest)."""
+    from netgen.meshing import MeshingParameters
+
+    mp = MeshingParameters(maxh=h, grading=grading)
+    for point, size in zip(points, sizes):
+        x, y, z = (tuple(float(c) for c in point) + (0.0,))[:3]
+        mp.RestrictH(x=x, y=y, z=z, h=float(size))
+    return _indenter_geometry(kind, R, h, contact_zone).GenerateMesh(mp=mp)
 
 
 def _on_circle(c, kind, R):

@@ -71,7 +71,9 @@ _TABLE: dict[str, Param] = {p.name: p for p in [
        "int", lower=100),
     _p("space_adapt", "repeat", "", "how the mesh is adapted (space_tol > 0): 'repeat' = the whole run repeated on "
        "each finer mesh (one mesh for the whole history), 'during' = refined during the run where the estimate asks, "
-       "the state carried onto the finer mesh (implicit, bdf2, vi)", "choice", choices=("repeat", "during")),
+       "the state carried onto the finer mesh (implicit, bdf2, vi), 'remesh' = as 'repeat', each mesh made anew from "
+       "the body's geometry with the sizes the estimate asks for (the Hertz bodies)", "choice",
+       choices=("repeat", "during", "remesh")),
     _p("space_goal", "energy", "", "what adaptive refinement (space_tol > 0) aims at: 'energy' = the error in the "
        "energy norm, 'pressure' = the contact pressure (each element's energy indicator weighted by a dual problem's: "
        "the body held where it presses, moved by the pressure's shape there); the tolerance stays the energy's",

@@ -409,7 +409,11 @@ def _check_adaptive(body, v) -> None:
         raise ParameterError("space_adapt = 'during' carries the state of the schemes 'implicit', 'bdf2' and 'vi' "
                              "onto a finer mesh, not the explicit scheme's (its step limit is the mesh's): give "
                              "scheme = 'implicit' or 'bdf2', or space_adapt = 'repeat'")
-    if v["checkpoint_every"] and v.get("space_adapt", "repeat") == "repeat":
+    if v.get("space_adapt") == "remesh" and not body.remeshable:
+        raise ParameterError(f"space_adapt = 'remesh' meshes the body anew from its geometry, which a {body.kind} "
+                             "does not have (the Hertz bodies halfdisc and hemisphere do): give space_adapt = 'repeat' "
+                             "or 'during'")
+    if v["checkpoint_every"] and v.get("space_adapt", "repeat") != "during":
         raise ParameterError(f"checkpoint_every = {v['checkpoint_every']} with space_tol = {v['space_tol']:g}: an "
                              "adapted run is repeated on each mesh and cannot be continued from a checkpoint; leave "
                              "checkpoint_every = 0, or adapt during the run (space_adapt = 'during')")

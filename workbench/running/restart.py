@@ -313,7 +313,7 @@ def check(path, archive: xr.Dataset, state: dict, scene, model_terms) -> None:
                              f"{', '.join(diff)}; a restart may change only T (to >= {t:g} s, the archive's time) and "
                              f"the output options (checkpoint_every, snapshots after t = {t:g} s): start a new run for "
                              "other values")
-    if old.values.get("space_tol", 0.0) > 0 and old.values.get("space_adapt", "repeat") == "repeat":
+    if old.values.get("space_tol", 0.0) > 0 and old.values.get("space_adapt", "repeat") != "during":
         raise ParameterError(f"restart {str(path)!r}: the run was refined adaptively (space_tol = {old['space_tol']:g}), "
                              "on meshes that follow its whole history: a longer run would adapt to a longer one, so "
                              "run again from 0 to the new T (space_adapt = 'during' runs can be continued)")
