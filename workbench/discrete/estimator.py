@@ -195,8 +195,8 @@ class RecoveredStrain:
 
 
 #: The fewest pressed contact vertices for which :class:`PressureGoal` weighs: a zone of fewer is a point to the mesh,
-#: and moving a point holds infinite energy (the discrete dual is then the mesh's own singularity there: on Hertz's
-#: first steps one element carried half the dual's weight, and marking chased it 14 times).
+#: and moving a point holds infinite energy (the discrete dual is then the mesh's own singularity there: at the first
+#: step of Model A's Hertz, one vertex pressed, one element carried 28 % of the dual's weight).
 MIN_PRESSED = 3
 
 
@@ -253,8 +253,8 @@ class PressureGoal:
         """``p`` with the values at a held vertex (the Hertz apex, whose force is the support's reaction) and at the
         vertices of its contact facets replaced by the nearest other pressed vertex's. The reaction is a spike on the
         scale of its elements, and the recovered pressure spreads it over that patch; as data of the dual it is a
-        feature that refinement would chase, on each finer mesh again (measured: the Hertz half-disc of Model A
-        refined at its apex 11 times)."""
+        feature that refinement would chase, on each finer mesh again (measured on Model A's Hertz half-disc: the
+        loop's 15 meshes went from 456 to only 716 dofs, each refined at the apex)."""
         if not len(self.d.pinned_nodes):
             return p
         node_of = {v: i for i, v in enumerate(np.asarray(self.d.vertex_numbers).tolist())}
@@ -277,10 +277,10 @@ class PressureGoal:
         pressed = p > 0
         if pressed.sum() < MIN_PRESSED:
             return None
-        p = self._unpinned(p, pressed)
-        held = self.held(pressed)
         import ngsolve as ngs
 
+        p = self._unpinned(p, pressed)
+        held = self.held(pressed)
         mask = np.array(self.d.fes.FreeDofs(), dtype=bool)
         mask[held] = False
         free = ngs.BitArray(mask.tolist())

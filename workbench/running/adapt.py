@@ -7,12 +7,12 @@ T: ``runner.ESTIMATE_SPACING``), each element keeps the largest
 indicator it had over the run, and the elements that carry the share ``DORFLER`` of the sum of those are bisected
 (Dörfler marking; netgen keeps the curved sides on their geometry), or with ``space_adapt = "remesh"`` the body is
 meshed anew from its geometry with the sizes that equidistribute them (:func:`remesh_sizes`: finer and coarser, not
-nested; the Hertz bodies). So the final mesh is fine wherever the solution
-needed it at any time (the edge of a contact zone at all its radii), and the run on it is an ordinary run, with no
-transfer of state between meshes. With ``space_goal = "pressure"`` the marked quantity is each element's largest
-eta_K(u) eta_K(z) over the run, z the dual problem of the contact pressure
-(:class:`workbench.discrete.estimator.PressureGoal`); the tolerance is still the energy estimate's. It stops when the largest relative estimate over the run is at most
-``space_tol``, or when refining again would exceed ``max_dofs`` dofs, or after ``MAX_LEVELS`` meshes.
+nested; the Hertz bodies). So the final mesh is fine wherever the solution needed it at any time (the edge of a
+contact zone at all its radii), and the run on it is an ordinary run, with no transfer of state between meshes. With
+``space_goal = "pressure"`` the marked quantity is each element's largest eta_K(u) eta_K(z) over the snapshots and T,
+z the dual problem of the contact pressure (:class:`workbench.discrete.estimator.PressureGoal`); the tolerance is
+still the energy estimate's. It stops when the largest relative estimate over the run is at most ``space_tol``, or
+when refining again would exceed ``max_dofs`` dofs, or after ``MAX_LEVELS`` meshes.
 
 The Dataset is the run on the final mesh, with ``space_error_estimate(time)``, ``ndof(time)``, the meshes' history
 (``level_ndof(level)``, ``level_space_error_estimate(level)``, ``level_wall_time(level)``) and the attributes
@@ -37,8 +37,8 @@ DORFLER = 0.5
 #: The most meshes an adaptive run tries.
 MAX_LEVELS = 15
 #: space_adapt = "remesh": the next mesh's elements over this one's, and how fast netgen lets sizes grow between
-#: the sizes asked for (its ``grading``; 0.15 against its default 0.3 gave the Hertz pressure 0.47 % lumped at 1828 dofs
-#: where 0.3 gave 0.65 % at 1540).
+#: the sizes asked for (its ``grading``; in a prototype 0.15 gave the 2D Hertz pressure 0.47 % lumped at 1828 dofs,
+#: netgen's default 0.3 gave 0.65 % at 1540).
 REMESH_GROWTH, REMESH_GRADING = 2.0, 0.15
 
 
@@ -95,7 +95,6 @@ def remesh_sizes(mesh, indicators: np.ndarray, order: int, growth: float = REMES
     elements, sum_K (h_K / h_new)^d. Each size stays within 1/4 and 4 times the element's (its longest edge): the
     mesh is coarsened where the indicator is small, not only refined.
 
-    >>> import ngsolve as ngs
     >>> from ngsolve.meshes import MakeStructured2DMesh
     >>> m = MakeStructured2DMesh(quads=False, nx=4, ny=4)
     >>> where, size = remesh_sizes(m, np.r_[np.full(16, 1e-6), np.full(16, 1.0)], order=1)
