@@ -324,3 +324,18 @@ def test_remesh_aimed_at_the_pressure_beats_the_built_in_zone():
     assert ds.attrs["space_levels"] >= 4 and ds.attrs["ndof"] < built_in.attrs["ndof"]
     assert all(a < b for a, b in zip(errors(ds), errors(built_in))), (errors(ds), errors(built_in))
     assert max(errors(ds)) < 0.0045
+
+
+def test_remesh_on_the_hemisphere():
+    """3D: the quarter ball meshed anew (its named faces, apex and contact zone kept) with the pressure's goal, one
+    mesh beyond the scene's within max_dofs: the lumped pressure at T is less than 0.6 x the given mesh's off
+    Hertz's (measured 3.54 % at 3828 dofs against 8.48 % at 2334)."""
+    from workbench.references import hertz
+
+    base = workbench.run("memory_hertz3d", T=0.5, k=0.5, progress=False)
+    with warnings.catch_warnings():
+        warnings.simplefilter("ignore", RuntimeWarning)
+        ds = workbench.run("memory_hertz3d", T=0.5, k=0.5, space_tol=0.001, max_dofs=5000, space_adapt="remesh",
+                           space_goal="pressure", progress=False)
+    assert ds.attrs["space_levels"] == 2 and base.attrs["ndof"] < ds.attrs["ndof"] <= 5000
+    assert hertz.profile(ds)["l2"] < 0.6 * hertz.profile(base)["l2"]
