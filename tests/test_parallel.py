@@ -31,6 +31,15 @@ def _mpiexec():
     return str(found) if found.exists() else shutil.which("mpiexec")
 
 
+def _mpi_script(tmp_path, processes: int, timeout: float, source: str):
+    """``source`` written to a script in ``tmp_path`` and run there on ``processes`` MPI processes (the finished
+    process, its output captured)."""
+    script = tmp_path / "fail.py"
+    script.write_text(source)
+    return subprocess.run([_mpiexec(), "-n", str(processes), sys.executable, str(script)], capture_output=True,
+                          text=True, env=alone(), timeout=timeout, cwd=tmp_path)
+
+
 def _run_distributed(n, scene, values, out, extra=()):
     """``mpiexec -n n workbench run scene --set name=value ... -o out [extra]``: (exit code, stdout, stderr); with
     ``--restart`` in ``extra`` the scene is the archive's."""
@@ -194,17 +203,15 @@ def test_a_contact_solve_that_fails_on_rank_0_stops_every_rank(tmp_path):
     """The contact problem is solved on rank 0 while the others serve its back-substitutions: a Newton failure there
     (injected at the fourth step) ends the serving, every rank stops at that step, rank 0 says it once (exit code 3)
     and writes the steps computed before."""
-    script = tmp_path / "fail.py"
-    script.write_text("import sys\nfrom workbench.discrete import condensation\nfrom workbench.errors import "
-                      "NewtonFailed\norig = condensation.CoupledNewton.solve\ncalls = []\n\n\n"
-                      "def failing(self, u_C, z_C, time, label=''):\n    calls.append(time)\n"
-                      "    if len(calls) == 4:\n        raise NewtonFailed(f'injected at t = {time:g}', time=time)\n"
-                      "    return orig(self, u_C, z_C, time, label)\n\n\n"
-                      "condensation.CoupledNewton.solve = failing\nsys.argv = ['workbench', 'run', 'tp4', '--scheme', "
-                      "'implicit', '--set', 'h=0.1', '--set', 'T=0.1', '--set', 'k=0.01', '-o', 'out.nc', "
-                      "'--no-progress']\nfrom workbench.cli import console\nsys.exit(console())\n")
-    p = subprocess.run([_mpiexec(), "-n", "3", sys.executable, str(script)], capture_output=True, text=True,
-                       env=alone(), timeout=300, cwd=tmp_path)
+    p = _mpi_script(tmp_path, 3, 300, "import sys\nfrom workbench.discrete import condensation\n"
+                    "from workbench.errors import "
+                    "NewtonFailed\norig = condensation.CoupledNewton.solve\ncalls = []\n\n\n"
+                    "def failing(self, u_C, z_C, time, label=''):\n    calls.append(time)\n"
+                    "    if len(calls) == 4:\n        raise NewtonFailed(f'injected at t = {time:g}', time=time)\n"
+                    "    return orig(self, u_C, z_C, time, label)\n\n\n"
+                    "condensation.CoupledNewton.solve = failing\nsys.argv = ['workbench', 'run', 'tp4', '--scheme', "
+                    "'implicit', '--set', 'h=0.1', '--set', 'T=0.1', '--set', 'k=0.01', '-o', 'out.nc', "
+                    "'--no-progress']\nfrom workbench.cli import console\nsys.exit(console())\n")
     assert p.returncode == 3 and p.stderr.count("injected") == 1, p.stderr
     ds = workbench.load(tmp_path / "out.nc")
     assert ds.attrs["status"] == "incomplete" and ds.sizes["time"] == 4  # (t = 0 and the three steps before)
@@ -294,14 +301,11 @@ def test_an_error_on_one_rank_ends_every_rank(tmp_path):
     """An unexpected error on rank 0 alone (injected in its serial view's setup) while rank 1 waits for it in an
     exchange: the command prints the traceback, says which rank failed and ends the job with a non-zero code, at once
     (before, rank 1 waited for ever)."""
-    script = tmp_path / "fail.py"
-    script.write_text("import sys\nimport workbench.parallel as p\norig = p.Shell.__init__\n\n\n"
-                      "def failing(self, d, serial_mesh):\n    if p.world().root:\n"
-                      "        raise RuntimeError('injected on rank 0')\n    orig(self, d, serial_mesh)\n\n\n"
-                      "p.Shell.__init__ = failing\nsys.argv = ['workbench', 'run', 'block', '--h', '0.25', '--T', "
-                      "'0.01', '--no-progress']\nfrom workbench.cli import console\nsys.exit(console())\n")
-    p = subprocess.run([_mpiexec(), "-n", "2", sys.executable, str(script)], capture_output=True, text=True,
-                       env=alone(), timeout=120, cwd=tmp_path)
+    p = _mpi_script(tmp_path, 2, 120, "import sys\nimport workbench.parallel as p\norig = p.Shell.__init__\n\n\n"
+                    "def failing(self, d, serial_mesh):\n    if p.world().root:\n"
+                    "        raise RuntimeError('injected on rank 0')\n    orig(self, d, serial_mesh)\n\n\n"
+                    "p.Shell.__init__ = failing\nsys.argv = ['workbench', 'run', 'block', '--h', '0.25', '--T', "
+                    "'0.01', '--no-progress']\nfrom workbench.cli import console\nsys.exit(console())\n")
     assert p.returncode != 0 and "injected on rank 0" in p.stderr and "rank 0 of 2 failed" in p.stderr, p.stderr
 
 

@@ -173,8 +173,8 @@ class Estimator:
 
 
 class RecoveredStrain:
-    """The Zienkiewicz–Zhu part of a displacement ``field``: eta_K^2 = int_K C (eps* - eps_h) : (eps* - eps_h) dx, with
-    eps* the strain recovered continuous (NGSolve's ``Set`` into H1 of ``order``) and C the ``tensor``."""
+    """The Zienkiewicz–Zhu part of a displacement ``field``: eta_K^2 = int_K C (eps* - eps_h) : (eps* - eps_h) dx,
+    with eps* the strain recovered continuous (NGSolve's ``Set`` into H1 of ``order``) and C the ``tensor``."""
 
     def __init__(self, field, tensor, dim: int, order: int):
         import ngsolve as ngs

@@ -79,7 +79,8 @@ def _linear_fit(patches, facets: list, xyz: np.ndarray, normal_axis: int, pinned
     xy = np.delete(xyz, normal_axis, axis=1)
     n, k = xy.shape
     centroid, mass = np.zeros((n, k)), np.zeros(n)
-    for vs in facets:  # (on a straight facet of m vertices: int phi_j = |E|/m, int x phi_j = |E| (x_j + sum x) / (m (m+1)))
+    # (on a straight facet E of m vertices: int phi_j = |E| / m, int x phi_j = |E| (x_j + sum x) / (m (m + 1)))
+    for vs in facets:
         pts = xy[vs]
         size = _measure(xyz[vs])  # (the facet's own size: the pressure is a force per area of the side)
         total = pts.sum(axis=0)

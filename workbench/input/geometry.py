@@ -458,7 +458,8 @@ class _Indenter(Geometry):
         >>> m = body.remeshed([(0.0, 0.0)], [0.004], grading=0.3).mesh()  # (fine at the apex only)
         >>> sorted(set(m.GetBoundaries())), m.ne < body.mesh().ne
         (['axis', 'curved', 'flank', 'interface', 'top'], True)
-        >>> bool(min(np.linalg.norm(np.subtract(m[e.vertices[0]].point, m[e.vertices[1]].point)) for e in m.edges) < 0.005)
+        >>> edge = lambda e: np.linalg.norm(np.subtract(m[e.vertices[0]].point, m[e.vertices[1]].point))
+        >>> bool(min(edge(e) for e in m.edges) < 0.005)
         True
         """
         return on_mesh(self, _remeshed_indenter(self.kind, self.extent[0], self.h, self.contact_zone, points, sizes,
