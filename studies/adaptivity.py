@@ -1,6 +1,6 @@
 """Adaptive meshes against the built-in contact-zone refinement: the estimator's effectivity and what the dofs buy.
 
-    python studies/adaptivity.py [--levels 7] [--three-d LEVELS] [--lee-radok] [--during] [--balance] [--goal]
+    python studies/adaptivity.py [--levels 7] [--three-d LEVELS] [--lee-radok] [--during] [--edge] [--balance] [--goal]
                                  [--out data/adaptivity]
 
 For ``memory_hertz`` (2D Signorini Hertz) it follows the adaptive loop of ``space_tol > 0`` level by level (the same
@@ -18,7 +18,9 @@ transfer error of the carried state on the curved half-disc (``during.csv``). ``
 error-controlled BDF2 steps and a mesh refined during the run, space_tol against rtol, the energy error at T against
 a finer run in both (``balance.csv``). ``--goal`` (alone, or with ``--three-d 1`` for the hemisphere): refinement
 aimed at the pressure (``space_goal = "pressure"``) against the energy's, by bisection and by remeshing
-(``space_adapt = "remesh"``), the pressure's errors against the dofs (``goal.csv``, ``goal_3d.csv``). Writes ``adaptivity.csv``, ``adaptivity_mesh.png`` (the final 2D mesh, whole and at the contact zone)
+(``space_adapt = "remesh"``), the pressure's errors against the dofs (``goal.csv``, ``goal_3d.csv``). ``--edge``
+(alone): Lee and Radok's radius with the mesh following the contact zone's edge during the run (``edge_tol``) against
+the built-in zones, and the constants of that refinement (``edge.csv``, ``space_edge_lee_radok.png``). Writes ``adaptivity.csv``, ``adaptivity_mesh.png`` (the final 2D mesh, whole and at the contact zone)
 and prints the tables of docs/adaptivity.md. One thread.
 """
 from __future__ import annotations
@@ -123,6 +125,63 @@ def lee_radok(rows):
         rows.append(dict(case="hertz Lee-Radok", mesh=label, ndof=ds.attrs["ndof"], cost=round(wall, 2),
                          radius_error_from_0_2=errors[0.2], radius_error_from_0_5=errors[0.5]))
         print(rows[-1], flush=True)
+
+
+def edge(rows, out):
+    """Lee and Radok's radius with the mesh adapted during the run toward the contact zone's edge (``edge_tol``,
+    ``space_adapt = "during"``, space_tol = 0.2) against the built-in zones, every run recorded (and so estimated) from
+    0.2 s, the largest error of the last vertex in contact over those records; then the constants of the edge's
+    refinement (``adapt.EDGE_MARGIN``, ``adapt.EDGE_GRADING``; a huge grading refines only the elements that hold the
+    edge) at edge_tol = 0.03, and the run recorded from the first step."""
+    import numpy as np
+
+    from workbench.running import adapt
+
+    base = dict(c_nu=1e8, tau=0.2, k=0.02, scheme="bdf2", snapshots=(), progress=False)
+    late = np.round(np.arange(0.2, 1.0 + 1e-9, 0.02), 10)
+
+    def one(label, record_times=late, **kw):
+        t0 = time.perf_counter()
+        with warnings.catch_warnings():
+            warnings.simplefilter("ignore", RuntimeWarning)
+            ds = workbench.run("hertz", **base, **kw, record_times=record_times)
+        errors = radius_errors(ds)
+        rows.append(dict(case="hertz Lee-Radok", mesh=label, ndof=ds.attrs["ndof"], mean_ndof=round(float(
+            ds.ndof.mean() if "ndof" in ds else ds.attrs["ndof"])), cost=round(time.perf_counter() - t0, 2), refinements=ds.attrs.get("space_refinements", 0),
+            edge_resolution=ds.attrs.get("contact_edge_resolution", float("nan")),
+            radius_error_from_0_2=errors[0.2], radius_error_from_0_5=errors[0.5],
+            radius_error_from_first=errors[0.0]))
+        print(rows[-1], flush=True)
+        return ds
+
+    for h in (0.00125, 0.001, 0.000625):
+        one(f"h_contact={h}", h_contact=h)
+    following = dict(space_tol=0.2, space_adapt="during")
+    for tol in (0.04, 0.03, 0.02):
+        ds = one(f"during edge_tol={tol}", edge_tol=tol, **following)
+        if tol == 0.03:
+            plotting.space(ds, out / "space_edge_lee_radok.png")
+    one("during, energy only", **following)
+    one("during edge_tol=0.03, recorded from the first step", record_times=None, edge_tol=0.03, **following)
+    for kw in (dict(k=0.02), dict(k=0.02, edge_tol=0.01), dict(k=0.005), dict(k=0.00125), dict(k=0.02, c_nu=1e9),
+               dict(k=0.02, c_nu=1e10)):  # (the first 0.2 s: the error at 0.02, 0.04 and 0.1 s)
+        with warnings.catch_warnings():
+            warnings.simplefilter("ignore", RuntimeWarning)
+            ds = workbench.run("hertz", **{**base, **following, "edge_tol": 0.03, **kw}, T=0.1,
+                               record_times=[0.02, 0.04, 0.1])
+        early = {}
+        for t in (0.02, 0.04, 0.1):
+            a = hertz.lee_radok(t, rate=10.0, R=1.0, E=1000.0, nu=0.3, tau=0.2, body="cylinder")
+            early[f"radius_error_at_{t:g}"] = hertz.profile(ds, t)["a_last"] / a - 1
+        rows.append(dict(case="hertz Lee-Radok, T = 0.1", mesh=f"during {kw}", ndof=ds.attrs["ndof"], **early))
+        print(rows[-1], flush=True)
+    kept = adapt.EDGE_MARGIN, adapt.EDGE_GRADING
+    try:
+        for margin, grading in ((0.5, 0.5), (0.7, 0.5), (0.85, 0.5), (1.0, 0.25), (1.0, 0.75), (1.0, 1e9)):
+            adapt.EDGE_MARGIN, adapt.EDGE_GRADING = margin, grading
+            one(f"during edge_tol=0.03, EDGE_MARGIN={margin}, EDGE_GRADING={grading:g}", edge_tol=0.03, **following)
+    finally:
+        adapt.EDGE_MARGIN, adapt.EDGE_GRADING = kept
 
 
 def during(rows, out):
@@ -249,8 +308,10 @@ def goal(rows, three_d: bool):
 
 
 def radius_errors(ds):
-    errors = {0.2: 0.0, 0.5: 0.0}
-    for t in ds.time.values[1:]:
+    """The largest error of the last vertex in contact against Lee and Radok's a(t) over the records from 0.2 s,
+    from 0.5 s and from the first after t = 0 (key 0.0)."""
+    errors = {0.0: 0.0, 0.2: 0.0, 0.5: 0.0}
+    for t in ds.time.values[ds.time.values > 0]:
         a = hertz.lee_radok(t, rate=10.0, R=1.0, E=1000.0, nu=0.3, tau=0.2, body="cylinder")
         off = abs(hertz.profile(ds, t)["a_last"] / a - 1)
         for start in errors:
@@ -321,6 +382,7 @@ def main():
     parser.add_argument("--levels", type=int, default=7)
     parser.add_argument("--three-d", type=int, default=0)
     parser.add_argument("--lee-radok", action="store_true", help="only the growing contact zone (lee_radok.csv)")
+    parser.add_argument("--edge", action="store_true", help="only Lee and Radok's radius with edge_tol (edge.csv)")
     parser.add_argument("--during", action="store_true", help="only the mesh refined during the run (during.csv)")
     parser.add_argument("--balance", action="store_true", help="only space_tol against rtol (balance.csv)")
     parser.add_argument("--goal", action="store_true", help="only space_goal = 'pressure' against the energy's "
@@ -334,6 +396,10 @@ def main():
         with threadpool_limits(1):
             lee_radok(rows)
         return write(rows, out / "lee_radok.csv")
+    if args.edge:
+        with threadpool_limits(1):
+            edge(rows, out)
+        return write(rows, out / "edge.csv")
     if args.during:
         with threadpool_limits(1):
             during(rows, out)

@@ -202,6 +202,54 @@ def test_space_adapt_refused_where_it_cannot_work():
         workbench.scene("tp4", scheme="implicit", space_adapt="during")
 
 
+def test_edge_tol_is_refused_without_a_mesh_that_follows_the_run():
+    for kw in (dict(edge_tol=0.05), dict(edge_tol=0.05, space_tol=0.2), dict(edge_tol=0.05, space_adapt="during")):
+        with pytest.raises(ParameterError, match="edge_tol = 0.05 is judged by a mesh that follows the run"):
+            workbench.scene("memory_hertz", **kw)
+    with pytest.raises(ParameterError, match=r"edge_tol = 0.7 is outside the allowed range 0 <= edge_tol <= 0.5"):
+        workbench.scene("memory_hertz", edge_tol=0.7)
+
+
+def test_the_edge_of_a_pressed_disc_is_where_the_pressure_ends():
+    """ContactEdge on the hemisphere's curved side (3D, a quarter of the zone) with the pressure of a zone of radius
+    0.1: the zone's size is the quarter disc's sqrt(pi/4) 0.1 and the edge facets lie on r = 0.1, each to within
+    one facet."""
+    from workbench.discrete.estimator import ContactEdge
+
+    d = discretisation.build(workbench.scene("memory_hertz3d", T=0.25, k=0.25))
+    r = np.hypot(d.node_xyz[:, 0], d.node_xyz[:, 1])
+    e = ContactEdge(d).measure(np.where(r < 0.1, 1.0, 0.0))
+    facet = e.resolution * e.zone
+    assert abs(e.zone - np.sqrt(np.pi / 4) * 0.1) < facet
+    assert np.all(np.abs(np.hypot(e.points[:, 0], e.points[:, 1]) - 0.1) < facet)
+    assert ContactEdge(d).measure(np.ones(len(r))) is None and ContactEdge(d).measure(np.zeros(len(r))) is None
+
+
+def test_edge_tol_resolves_the_contact_zone_s_edge_at_every_estimate_time():
+    """The Hertz half-disc whose energy estimate meets space_tol = 0.2 on the given mesh, where the last vertex in
+    contact is 8.6 % inside Hertz's a: with edge_tol = 0.05 every recorded resolution is at most 0.05, the mesh is
+    refined toward the edge only, and the last vertex in contact is within 1.5 % of a."""
+    from workbench.references import hertz
+
+    base = dict(h_contact=0.01, space_tol=0.2, space_adapt="during", progress=False)
+    plain = workbench.run("memory_hertz", **base)
+    ds = workbench.run("memory_hertz", **base, edge_tol=0.05)
+    assert plain.attrs["space_refinements"] == 0 and "contact_edge_resolution" not in plain
+    assert abs(hertz.profile(plain)["a_last"] / hertz.profile(plain)["a"] - 1) > 0.05
+    resolution = ds.contact_edge_resolution.values
+    assert np.isnan(resolution[0]) and np.all(resolution[1:] <= 0.05), resolution  # (at rest, t = 0: no edge)
+    assert ds.attrs["space_refinements"] > 0 and ds.attrs["contact_edge_resolution"] <= 0.05
+    assert abs(hertz.profile(ds)["a_last"] / hertz.profile(ds)["a"] - 1) < 0.015
+    body = workbench.scene("memory_hertz", h_contact=0.01).model_of().geometry
+    a = hertz.profile(ds)["a"]
+    (where, h), (given_where, given_h) = (adapt.element_sizes(m) for m in (
+        ngs.Mesh(of_run(body, ds).adapted_mesh), body.mesh()))
+    near, given_near = (np.hypot(w[:, 0] - a, w[:, 1]) < 0.02 for w in (where, given_where))
+    # (graded toward the edge, the rest as given)
+    assert np.median(h[near]) < 0.5 * np.median(given_h[given_near])
+    assert np.isclose(h[~near].max(), given_h[~given_near].max(), rtol=1e-9)
+
+
 def test_a_continuation_from_a_checkpoint_is_the_run_straight_through(tmp_path, monkeypatch):
     """checkpoint_every with space_adapt = 'during': the checkpoints fall on estimate times that met the tolerance,
     so a continuation goes back where the run itself would; from the first checkpoint, on a mesh the run refined

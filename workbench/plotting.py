@@ -303,9 +303,15 @@ def space(ds, path=None):
     fig, (left, right) = figure(1, 2, figsize=(9, 3.6))
     t, e = ds.time.values, ds.space_error_estimate.values
     known = np.isfinite(e)
-    left.plot(t[known], e[known], "o-", ms=3)
+    left.plot(t[known], e[known], "o-", ms=3, label="energy estimate / largest energy norm")
     left.axhline(tol, color="gray", ls=":", lw=1, label=f"space_tol = {tol:g}")
-    left.set(xlabel="t [s]", ylabel="estimate / largest energy norm [1]", title="estimate in space")
+    if "contact_edge_resolution" in ds:  # (edge_tol: the contact zone's edge, also a share, on the same axis)
+        r = ds.contact_edge_resolution.values
+        seen = np.isfinite(r)
+        left.plot(t[seen], r[seen], "s-", ms=3, color="C1", label="contact edge's facet / zone's size")
+        left.axhline(float(ds.attrs.get("edge_tol", np.nan)), color="C1", ls=":", lw=1,
+                     label=f"edge_tol = {float(ds.attrs.get('edge_tol', np.nan)):g}")
+    left.set(xlabel="t [s]", ylabel="relative [1]", title="estimate in space")
     left.legend(fontsize=7)
     if "refinement" in ds.dims:
         right.step(t, ds.ndof.values, where="post")

@@ -43,13 +43,15 @@ from ..physics.kelvin_voigt import strain
 @dataclass(frozen=True)
 class Estimate:
     """One evaluation of the estimator: eta_K^2 per element (``volume``, ``contact``: the element's contact facets),
-    the total eta, the energy norm of u_h and, with a goal, the dual problem's eta_K(z)^2 (``weights``)."""
+    the total eta, the energy norm of u_h, with a goal the dual problem's eta_K(z)^2 (``weights``) and, where the
+    edge of the contact zone is watched (``edge_tol``), how finely the mesh resolves it (``edge``)."""
 
     volume: np.ndarray
     contact: np.ndarray
     total: float
     norm: float
     weights: np.ndarray | None = None
+    edge: Edge | None = None
 
     @property
     def indicators(self) -> np.ndarray:
@@ -69,7 +71,7 @@ class Estimator:
     """The estimator of one discretisation and the scheme's observer (module docs); :meth:`evaluate` reads the state
     the scheme holds now."""
 
-    def __init__(self, disc, observer, goal: str = "energy"):
+    def __init__(self, disc, observer, goal: str = "energy", edge: bool = False):
         import ngsolve as ngs
 
         d, dim = disc, disc.dim
@@ -82,6 +84,7 @@ class Estimator:
         if d.contact_name and len(d.node_dofs):
             self._contact_part(ngs, tensor)
         self.goal = PressureGoal(d) if goal == "pressure" and self._contact is not None else None
+        self.edges = ContactEdge(d) if edge and self._contact is not None else None
 
     def _contact_part(self, ngs, tensor) -> None:
         """The traction residual on the contact facets and the element each facet bounds."""
@@ -139,14 +142,16 @@ class Estimator:
 
         mesh = self.d.mesh
         volume = self._zz.indicators()
-        contact, weights = np.zeros(mesh.ne), None
+        contact, weights, edge = np.zeros(mesh.ne), None, None
         if self._contact is not None:
             values = self.observer.node_values(t)
             contact = self._contact_indicators(t, values)
             if self.goal is not None and goal:
                 weights = self.goal.weights(values.get("contact_pressure_recovered", values.get("contact_pressure")))
+            if self.edges is not None:
+                edge = self.edges.measure(values.get("contact_pressure"))
         norm = float(np.sqrt(max(ngs.Integrate(self._energy, mesh), 0.0)))
-        return Estimate(volume, contact, float(np.sqrt(volume.sum() + contact.sum())), norm, weights)
+        return Estimate(volume, contact, float(np.sqrt(volume.sum() + contact.sum())), norm, weights, edge)
 
     def _contact_indicators(self, t, values: dict) -> np.ndarray:
         import ngsolve as ngs
@@ -170,6 +175,64 @@ class Estimator:
         out = np.zeros(mesh.ne)
         np.add.at(out, elements, np.maximum(per_facet[facets], 0.0))
         return out
+
+
+@dataclass(frozen=True)
+class Edge:
+    """The contact zone's edge at one time (:class:`ContactEdge`): ``resolution``, the longest facet across it over
+    the zone's size; ``points``, those facets' centroids; ``zone``, the zone's size."""
+
+    resolution: float
+    points: np.ndarray
+    zone: float
+
+
+class ContactEdge:
+    """How finely the mesh resolves the edge of the contact zone (``edge_tol``).
+
+    A facet of the contact side with a pressed vertex (lumped pressure > 0) and a free one holds the zone's edge: the
+    discrete zone ends at one of its vertices, so the facet's size bounds how well the mesh can place the edge. Its
+    longest edge over the zone's size, the pressed vertices' share of the side to the power 1/(d-1) (a 2D zone modelled
+    by its half: its half-width; a 3D quarter of a circular zone: 0.89 times its radius), is the ``resolution``.
+    That is a resolution, not an error: the discrete solution may place the edge elsewhere by its own error, which
+    the energy estimate watches (measured on Lee and Radok's Hertz in ``docs/adaptivity.md``).
+
+    >>> import numpy as np, workbench
+    >>> from workbench.discrete.discretisation import build
+    >>> d = build(workbench.scene("memory_hertz", h=0.2, h_contact=0.02, T=0.1, k=0.1))
+    >>> edges = ContactEdge(d)
+    >>> x = d.node_xyz[:, 0]
+    >>> e = edges.measure(np.where(x < 0.1, 1.0, 0.0))  # (pressed up to the vertex at x = 0.086, free from 0.107)
+    >>> len(e.points), round(float(e.points[0, 0]), 4), round(e.zone, 4), round(e.resolution, 3)
+    (1, 0.0962, 0.0964, 0.216)
+    """
+
+    def __init__(self, disc):
+        mesh = disc.mesh
+        node = np.full(mesh.nv, -1, dtype=np.int64)
+        node[disc.vertex_numbers] = np.arange(len(disc.vertex_numbers))
+        vertices = np.array([[v.nr for v in el.vertices] for el in mesh.Boundaries(disc.contact_name).Elements()],
+                            dtype=np.int64)
+        self._facets = node[vertices]  # (each facet's contact nodes)
+        corners = disc.vertex_xyz[vertices]
+        self._centroids = corners.mean(axis=1)
+        n = corners.shape[1]
+        self._sizes = np.max([np.linalg.norm(corners[:, i] - corners[:, j], axis=1)
+                              for i in range(n) for j in range(i)], axis=0)
+        self._weights, self._dim = disc.node_weights, disc.dim
+
+    def measure(self, pressure) -> Edge | None:
+        """The edge where ``pressure`` (lumped, at the contact nodes) ends, or None: nothing pressed, or the whole
+        side (no edge on it)."""
+        if pressure is None:
+            return None
+        pressed = np.nan_to_num(np.asarray(pressure, dtype=float)) > 0
+        on = pressed[self._facets]
+        across = on.any(axis=1) & ~on.all(axis=1)
+        if not across.any():
+            return None
+        zone = float(self._weights[pressed].sum()) ** (1.0 / (self._dim - 1))
+        return Edge(float(self._sizes[across].max()) / zone, self._centroids[across], zone)
 
 
 class RecoveredStrain:

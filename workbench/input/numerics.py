@@ -56,7 +56,7 @@ TIME = ("k", "scheme", "solver", "contact_solver")
 #: Error-controlled steps (``rtol > 0``): the tolerances and the bounds of the step.
 CONTROL = ("rtol", "atol", "k_min", "k_max")
 #: Adaptive refinement in space (``space_tol > 0``): the tolerance of the estimate and the bound of the mesh.
-ADAPT = ("space_tol", "max_dofs", "space_adapt", "space_goal")
+ADAPT = ("space_tol", "max_dofs", "space_adapt", "space_goal", "edge_tol")
 #: The explicit scheme's stability override.
 EXPLICIT = ("allow_unstable",)
 #: Model B: the rule of the memory integral and the approximation of a general kernel.
@@ -130,6 +130,7 @@ class Numerics:
     max_dofs: int = 200000
     space_adapt: str = "repeat"
     space_goal: str = "energy"
+    edge_tol: float = 0.0
     threads: int | None = None
 
     @property

@@ -78,6 +78,10 @@ _TABLE: dict[str, Param] = {p.name: p for p in [
        "energy norm, 'pressure' = the contact pressure (each element's energy indicator weighted by a dual problem's: "
        "the body held where it presses, moved by the pressure's shape there); the tolerance stays the energy's",
        "choice", choices=("energy", "pressure")),
+    _p("edge_tol", 0.0, "1", "how finely a mesh that follows the run (space_adapt = 'during') resolves the edge of the "
+       "contact zone: at every estimate time the facets across the edge are at most edge_tol times the zone's size "
+       "(its measure to the power 1/(d-1)), else the run goes back and refines a mesh graded toward the edge; "
+       "0: not asked", lower=0.0, upper=0.5),
     _p("allow_unstable", False, "", "run the explicit scheme even when k exceeds its predicted stability limit",
        "flag"),
     _p("solver", "auto", "", "linear solver for the constant matrix: banded Cholesky (RCM order), NGSolve's "

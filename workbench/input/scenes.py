@@ -448,6 +448,9 @@ def _check_consistency(name, body, v, model="A"):
                                  f"{k_max:g}]")
     if v.get("space_tol", 0.0) > 0:
         _check_adaptive(body, v)
+    if v.get("edge_tol", 0.0) > 0 and (v.get("space_tol", 0.0) <= 0 or v.get("space_adapt", "repeat") != "during"):
+        raise ParameterError(f"edge_tol = {v['edge_tol']:g} is judged by a mesh that follows the run: give space_tol > "
+                             "0 (the energy's tolerance, e.g. 0.2) and space_adapt = 'during', or leave edge_tol = 0")
     steps = v["T"] / v["k"]
     if steps > MAX_STEPS:
         raise ParameterError(f"k = {v['k']:g} and T = {v['T']:g} make {steps:.3g} time steps; at most {MAX_STEPS:.0e} "

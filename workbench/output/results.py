@@ -61,6 +61,8 @@ VARIABLES = {
     "error_estimate": ("1", "scaled local error estimate of the step (<= 1: within rtol, atol)"),
     "space_error_estimate": ("1", "a posteriori estimate of the error in space at the time, energy norm, relative to "
                              "the largest norm of u so far (space_tol > 0)"),
+    "contact_edge_resolution": ("1", "the longest contact facet across the edge of the contact zone over the zone's "
+                                "size (its measure to the power 1/(d-1)), at the estimate times (edge_tol > 0)"),
     "coupling_passes": ("1", "passes of the (u, beta) coupling iteration in the time step"),
     "iterations": ("1", "active-set iterations in the time step"),
     "linear_iterations": ("1", "conjugate gradient iterations on the active contact points in the time step "

@@ -11,6 +11,9 @@ displacement, velocity and the accepted states a multistep formula or a predicto
 histories and stored steps (dof vectors of the displacement's space), the bonding field on the contact facets, the
 contact points' states and forces (a warm start only), the step controller and the record schedule. Checkpoints
 (``checkpoint_every``) fall on the estimate times that met the tolerance, so a continuation goes on as the run did.
+With ``edge_tol > 0`` an estimate time also fails where the facets across the contact zone's edge are longer than
+``edge_tol`` times the zone's size (:class:`workbench.discrete.estimator.ContactEdge`); the finer mesh is then graded
+toward that edge (:func:`workbench.running.adapt.refine_toward`).
 
 **The transfer is exact.** netgen's bisection nests the meshes, so every coarse P1 or P2 field is a field of the
 finer space, and the prolongation (``discrete/transfer.py``) reproduces it; a facet's bonding field passes to both
@@ -77,8 +80,8 @@ class Follow:
     ``watching`` (that first pass) nothing is refined: the estimates and the states of every estimate time are kept
     (``seen``, ``kept``) until the scale is known."""
 
-    def __init__(self, tol: float, max_dofs: int, order: int, atol: float):
-        self.tol, self.max_dofs, self.order, self.atol = tol, max_dofs, order, atol
+    def __init__(self, tol: float, max_dofs: int, order: int, atol: float, edge_tol: float = 0.0):
+        self.tol, self.max_dofs, self.order, self.atol, self.edge_tol = tol, max_dofs, order, atol, edge_tol
         self.norm = self.scale = 0.0
         self.geometry = None
         self.saved = None  # (t, state) at the last estimate time that met the tolerance
@@ -123,10 +126,18 @@ class Follow:
         out["space_error_estimate"] = archive.space_error_estimate * max(self.scale, self.norm, 1e-300)
         return out
 
+    def failing(self, estimate, displacement: float) -> tuple[bool, bool]:
+        """(whether the energy estimate exceeds its tolerance, whether the contact zone's edge is resolved more
+        coarsely than ``edge_tol``). Neither while the largest ``displacement`` is below ``atol``: a body at rest holds
+        round-off, whose relative error is anything."""
+        if displacement <= self.atol:
+            return False, False
+        edge = estimate.edge is not None and 0 < self.edge_tol < estimate.edge.resolution
+        return estimate.total > self.tol * max(self.norm, self.scale), edge
+
     def too_large(self, estimate, displacement: float) -> bool:
-        """Whether ``estimate`` exceeds the tolerance. Not while the largest ``displacement`` is below ``atol``: a
-        body at rest holds round-off, whose relative error is anything."""
-        return displacement > self.atol and estimate.total > self.tol * max(self.norm, self.scale)
+        """Whether ``estimate`` asks for a finer mesh (:meth:`failing`)."""
+        return any(self.failing(estimate, displacement))
 
     def consider(self, estimate, body, mesh, displacement: float) -> None:
         """At an estimate time: refine where ``estimate`` is large if it exceeds the tolerance."""
@@ -134,16 +145,23 @@ class Follow:
         if self.watching:  # (judged once the whole run's largest norm is known)
             self.seen.append((estimate, displacement, body, mesh))
             return
-        if self.full or not self.too_large(estimate, displacement):
-            return
-        self.refine(estimate.marking, body, mesh)
+        if not self.full and self.too_large(estimate, displacement):
+            self.refine(estimate, body, mesh, *self.failing(estimate, displacement))
 
-    def refine(self, indicators, body, mesh) -> None:
-        """The finer body (``geometry``) by Dörfler marking of ``indicators`` (an estimate's ``marking``), unless it
-        would exceed max_dofs."""
+    def refine(self, estimate, body, mesh, energy: bool = True, edge: bool = False) -> None:
+        """The finer body (``geometry``): bisected by Dörfler marking of the estimate's ``marking`` if the
+        ``energy`` failed, and graded toward the contact zone's edge if the ``edge`` did (:func:`adapt.refine_toward`,
+        to ``EDGE_MARGIN`` of what edge_tol allows there), unless it would exceed max_dofs."""
+        import ngsolve as ngs
+
+        finer = adapt.refine(mesh, adapt.mark(estimate.marking)) if energy else mesh.ngmesh
+        if edge:
+            e = estimate.edge
+            finer = adapt.refine_toward(ngs.Mesh(finer), e.points, adapt.EDGE_MARGIN * self.edge_tol * e.zone,
+                                        self.max_dofs)
         # (through the archive's text of the mesh, whose coordinates differ by an ulp: a continuation then reads the
         # very mesh the run went on with, and is bitwise the run straight through)
-        finer = on_mesh(body, from_text(to_text(adapt.refine(mesh, adapt.mark(indicators)))))
+        finer = on_mesh(body, from_text(to_text(finer)))
         self._dofs = adapt.displacement_dofs(finer.adapted_mesh, finer, self.order)
         if self._dofs > self.max_dofs:
             self.full = True
@@ -228,7 +246,7 @@ def _points(coarse, fine):
 def run(make_job, model, numerics, execute_args: tuple):
     """One run from 0 to T whose mesh is refined where and when the estimate asks (module docs), or the
     continuation of one from its checkpoint. Returns the Dataset on the final mesh."""
-    follow = Follow(numerics.space_tol, numerics.max_dofs, numerics.order, numerics.atol)
+    follow = Follow(numerics.space_tol, numerics.max_dofs, numerics.order, numerics.atol, numerics.edge_tol)
     segments, resume = follow.segments, None
     job, r = make_job(model), None
     if job.resume is not None:  # (a continuation: the first pass and the meshes before are in its archive)
@@ -287,8 +305,8 @@ def _first_pass(make_job, model, follow: Follow, execute_args: tuple):
     follow.watching, follow.scale = False, follow.norm
     failed = [i for i, (e, displacement, _, _) in enumerate(follow.seen) if follow.too_large(e, displacement)]
     if failed:
-        estimate, _, body, mesh = follow.seen[failed[0]]
-        follow.refine(estimate.marking, body, mesh)
+        estimate, displacement, body, mesh = follow.seen[failed[0]]
+        follow.refine(estimate, body, mesh, *follow.failing(estimate, displacement))
     saved = follow.kept[failed[0] - 1] if failed and failed[0] > 0 else None
     follow.seen, follow.kept = [], []
     if follow.geometry is None:
@@ -341,6 +359,8 @@ def merge(segments: list, follow: Follow, job) -> xr.Dataset:
         out["adapted_mesh"] = ((), to_text(final_disc.geometry.adapted_mesh),
                                {"long_name": "the adapted mesh (netgen .vol text)"})
     largest = float(np.nanmax(out.space_error_estimate.values)) if out.sizes["time"] else float("nan")
+    if "contact_edge_resolution" in out and np.isfinite(out.contact_edge_resolution.values).any():
+        out.attrs["contact_edge_resolution"] = float(np.nanmax(out.contact_edge_resolution.values))
     out.attrs.update(space_error_estimate=largest, space_refinements=len(times), ndof=ndof[-1],
                      space_follow_json=json.dumps(follow.record()),
                      space_stop="max_dofs" if follow.full else "met")

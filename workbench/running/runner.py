@@ -323,7 +323,7 @@ class _Run:
         if n.space_tol > 0:
             from ..discrete.estimator import Estimator
 
-            self.estimator = Estimator(disc, scheme.observer(disc), goal=n.space_goal)
+            self.estimator = Estimator(disc, scheme.observer(disc), goal=n.space_goal, edge=n.edge_tol > 0)
         if self.resume is not None:
             restarts.restore(self.resume.state_for(disc, scheme), disc, scheme, self.steps, self.recorder,
                              self.resume.archive)
@@ -389,9 +389,12 @@ class _Run:
                 self._keep(e)
                 self.space_estimate, self.largest_norm = max(self.space_estimate, e.total), max(self.largest_norm, e.norm)
                 control = (control or {}) | {"space_error_estimate": e.total}  # (made relative by adapt.run)
+                displacement = float(np.abs(self.disc.u.vec.FV().NumPy()).max())
+                if self.estimator.edges is not None:  # (a body at rest, below atol, presses by round-off: no edge)
+                    judged = e.edge is not None and displacement > self.numerics.atol
+                    control["contact_edge_resolution"] = e.edge.resolution if judged else np.nan
                 if self.follow is not None:
-                    self.follow.consider(e, self.model.geometry, self.disc.mesh,
-                                         float(np.abs(self.disc.u.vec.FV().NumPy()).max()))
+                    self.follow.consider(e, self.model.geometry, self.disc.mesh, displacement)
             recorder.take(t, wanted, snapshot, control=control)
             if self.follow is not None and last[0] == t:
                 self._follow(t)
