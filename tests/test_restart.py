@@ -8,6 +8,7 @@ only to round-off. The same holds for a run killed (SIGKILL) at random moments a
 from its last checkpoint each time. Anything but T and the output options that differs from the
 archive is refused before any work, with every difference listed.
 """
+import json
 import os
 import random
 import signal
@@ -106,6 +107,18 @@ def test_checkpoints_are_written_during_the_run_and_continue_it(tmp_path):
     assert_same_run(ds, straight)
     with pytest.raises(workbench.ParameterError, match="checkpoint_every = 7 needs a file"):
         workbench.run("tp5", checkpoint_every=7, progress=False, **values)
+
+
+def test_a_continuation_records_at_the_record_times_its_archive_was_given(tmp_path):
+    """record_times off the grid of k (0.105, 0.155: the grid is made to contain them) are kept in the archive: a
+    checkpoint continued without them takes the same steps and records at the same times as the straight run."""
+    values = dict(h=0.1, k=0.01, T=0.2, scheme="bdf2", snapshots=())
+    times = [0.0, 0.05, 0.105, 0.155, 0.2]
+    path = tmp_path / "run.nc"
+    straight = workbench.run("tp5", checkpoint=path, checkpoint_every=7, progress=False, record_times=times, **values)
+    assert np.allclose(straight.time.values, times) and json.loads(straight.attrs["record_times"]) == times
+    ds = workbench.run("tp5", restart=path, checkpoint=tmp_path / "on.nc", progress=False, **values)
+    assert_same_run(ds, straight)
 
 
 KILL_RUN = ["run", "tp5", "--scheme", "bdf2", "--h", "0.05", "--k", "0.001", "--T", "1", "--no-progress",

@@ -13,6 +13,7 @@ import contextlib
 import dataclasses
 import functools
 import inspect
+import json
 import os
 import warnings
 from pathlib import PurePath
@@ -93,6 +94,8 @@ def run(scene=None, *, restart=None, checkpoint=None, progress=None, record_time
     _check_options(overrides, checkpoint, limit, threads, progress)
     _check_objects(record_times=record_times, times=times, model=model, restart=restart)
     sc, resume = _scene_and_archive(scene, restart, overrides, model)
+    if record_times is None and resume is not None:  # (a continuation records at the times its archive was given)
+        record_times = resume.record_times
     _check_checkpoint(sc, checkpoint)
     numerics = numerics_of.from_scene(sc, threads)
     grid, sync = _grid(sc, numerics, times, record_times, resume)
@@ -245,6 +248,12 @@ class _Resume:
     def provenance(self, attrs: dict) -> dict:
         return restarts.provenance(attrs, self.archive, self.path, self.state["time"])
 
+    @property
+    def record_times(self):
+        """The ``record_times`` the archived run was given (its attribute), or None."""
+        times = self.archive.attrs.get("record_times")
+        return None if times is None else [float(t) for t in json.loads(times)]
+
 
 def _scene_and_archive(scene, restart, overrides: dict, model):
     """(the scene, the archive to continue or None), checked: a restart may change only T and the output options."""
@@ -292,7 +301,7 @@ class _Run:
     def __init__(self, sc, model, numerics, world, call, *, resume=None, checkpoint=None, progress=None):
         self.sc, self.model, self.numerics, self.world, self.call = sc, model, numerics, world, call
         self.resume, self.checkpoint, self.progress = resume, checkpoint, progress
-        self.failed_checkpoint = None
+        self.failed_checkpoint, self.record_times = None, None
         # (space_tol > 0: the estimate in space; per element the largest indicator and what marking uses, over the run)
         self.estimator = self.indicators = self.marking = None
         self.space_estimate, self.largest_norm = 0.0, 0.0
@@ -302,6 +311,7 @@ class _Run:
         """Set up, step from 0 (or the archive's time) to T, and return the Dataset (None on ranks other than 0);
         a run that diverges raises with the Dataset of what it computed."""
         sc, n = self.sc, self.numerics
+        self.record_times = record_times  # (kept in the archive: a continuation records at the same times)
         with results.Clock() as setup, task_manager(n.threads), _naming_extremes(sc):
             self.disc = disc = parallel.discretise(self.model, sc, n)  # (threads: the factorisations use them too)
             self.scheme = scheme = scheme_class(n.scheme)(disc)
@@ -364,6 +374,8 @@ class _Run:
             "status": status, "failure": "" if failure is None else str(failure),
             "failure_type": "" if failure is None else type(failure).__name__,
         } | self.checks
+        if self.record_times is not None:
+            extra["record_times"] = [float(t) for t in self.record_times]  # (JSON text in the archive)
         out = results.provenance(self.sc, extra, self.call, self.model.terms)
         if self.resume is None:
             return out
