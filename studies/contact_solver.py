@@ -1,7 +1,7 @@
 """The contact solvers side by side: condensed (dense contact stiffness) against coupled (whole body, S never
 formed), on the same meshes, in one process, one thread each.
 
-    python studies/contact_solver.py [--out data/contact_solver] [--big] [--slope] [--slope-cg]
+    python studies/contact_solver.py [--out data/contact_solver] [--big] [--slope] [--slope-cg] [--pdas-amg]
 
 Per case and solver: dofs, contact points, steps, wall time of ``workbench.run`` (the mesh made once beforehand, so
 both pay the same), the setup time, back-substitutions (``linear_solves``), active-set and conjugate gradient
@@ -13,6 +13,8 @@ the cost of a step of the coupled solver against the dofs at three sizes of the 
 loop's wall time over its steps, and the least-squares slope in log-log (``slope.csv``). ``--slope-cg`` (alone): the
 same for ``memory_block`` to T = 0.3 at four sizes (4k to 78k dofs), with the sparse factor (``solver = "auto"``) and
 with AMG-preconditioned conjugate gradients (``solver = "cg"``), side by side (``slope_cg.csv``; about 12 minutes).
+``--pdas-amg`` (alone): a route measured and not taken, the active set on the whole body with AMG-CG solves
+(:func:`pdas_amg`, ``pdas_amg.csv``).
 """
 from __future__ import annotations
 
@@ -99,6 +101,76 @@ def slope(rows, cases=None) -> None:
               round(float(last), 3), ")", flush=True)
 
 
+def pdas_amg(rows, sizes=(0.01, 0.005)) -> None:
+    """A route measured and not taken (``--pdas-amg``): the primal-dual active set of deal.II's step-41/42 on the
+    whole body, each active set's system (the active points' normal displacement held at the gap) solved by conjugate
+    gradients preconditioned by the smoothed-aggregation AMG of the unconstrained K (pyamg, as ``solver = "cg"``),
+    projected onto the free unknowns. One load step of the hemisphere, Signorini, from rest to the full load; each
+    system solved loosely (10^-2) while the states change, then to 10^-10. Against the sparse Cholesky factor of K
+    in the same process, one thread."""
+    import pyamg
+    from scipy.sparse.linalg import LinearOperator, cg
+
+    from workbench.discrete import discretisation
+    from workbench.discrete.solvers import rigid_body_modes, to_scipy
+
+    for hc in sizes:
+        sc = workbench.scene("memory_hertz3d", h_contact=hc)
+        d = discretisation.build(sc)
+        discretisation.assemble(d)
+        t0 = time.perf_counter()
+        d.elastic.mat.Inverse(d.fes.FreeDofs(), inverse="sparsecholesky")
+        factor = time.perf_counter() - t0
+        K = to_scipy(d.elastic.mat).tocsr()
+        f = d.u.vec.CreateVector()
+        d.load_vector(sc["T"], f)
+        f = f.FV().NumPy().copy()
+        free = np.nonzero(np.array(d.fes.FreeDofs(), dtype=bool))[0]
+        t0 = time.perf_counter()
+        Kf = K[free][:, free].tocsr()
+        amg = pyamg.smoothed_aggregation_solver(Kf, B=np.ascontiguousarray(rigid_body_modes(d.fes)[free]),
+                                                symmetry="hermitian", strength=("symmetric", {"theta": 0.0}),
+                                                max_coarse=2000, coarse_solver="splu").aspreconditioner(cycle="V")
+        setup = time.perf_counter() - t0
+        g, nd = d.geometry, d.normal_dofs
+        gap = d.node_xyz[:, g.normal_axis]
+        where = -np.ones(K.shape[0], dtype=np.int64)
+        where[free] = np.arange(len(free))
+        point = where[nd]  # (-1: the held apex)
+        u, active = np.zeros(K.shape[0]), point < 0
+        tol, iterations, cg_iterations, solving = 1e-2, 0, 0, 0.0
+        while iterations < 40:
+            iterations += 1
+            held = active & (point >= 0)
+            keep = np.ones(len(free), dtype=bool)
+            keep[point[held]] = False
+            lift = np.zeros(len(free))
+            lift[point[held]] = g.normal_sign * gap[held]
+            b = np.where(keep, f[free] - Kf @ lift, 0.0)
+            op = LinearOperator(Kf.shape, matvec=lambda x: np.where(keep, Kf @ np.where(keep, x, 0.0), 0.0))
+            pre = LinearOperator(Kf.shape, matvec=lambda x: np.where(keep, amg @ np.where(keep, x, 0.0), 0.0))
+            count = [0]
+            t0 = time.perf_counter()
+            z, _ = cg(op, b, x0=np.where(keep, u[free], 0.0), rtol=tol, atol=0.0, maxiter=1000, M=pre,
+                      callback=lambda _: count.__setitem__(0, count[0] + 1))
+            solving += time.perf_counter() - t0
+            cg_iterations += count[0]
+            u[:] = 0.0
+            u[free] = np.where(keep, z, 0.0) + lift
+            force = -g.normal_sign * (K @ u - f)[nd]
+            new = (force + 1e3 * (g.normal_sign * u[nd] - gap) > 0) | (point < 0)
+            if np.array_equal(new, active):
+                if tol <= 1e-10:
+                    break
+                tol = 1e-10
+            active = new
+        rows.append(dict(case=f"memory_hertz3d h_contact={hc}", ndof=d.ndof, contact_points=len(nd),
+                         factor_K=round(factor, 3), amg_setup=round(setup, 3), active_set_iterations=iterations,
+                         cg_iterations=cg_iterations, solves=round(solving, 3),
+                         setup_and_solves_over_factor=round((setup + solving) / factor, 2)))
+        print(rows[-1], flush=True)
+
+
 def table(rows) -> str:
     """The markdown table of docs/schemes.md from the rows of one run."""
     by = {}
@@ -122,10 +194,20 @@ def main():
     p.add_argument("--big", action="store_true")
     p.add_argument("--slope", action="store_true", help="only the cost of a step against the dofs (slope.csv)")
     p.add_argument("--slope-cg", action="store_true", help="the same, factor against CG (slope_cg.csv)")
+    p.add_argument("--pdas-amg", action="store_true", help="only the active set on the whole body with AMG-CG, one "
+                   "load step of the hemisphere (pdas_amg.csv)")
     args = p.parse_args()
     out = Path(args.out)
     out.mkdir(parents=True, exist_ok=True)
     rows = []
+    if args.pdas_amg:
+        with threadpool_limits(1):
+            pdas_amg(rows)
+        with open(out / "pdas_amg.csv", "w", newline="") as f:
+            w = csv.DictWriter(f, fieldnames=list(rows[-1]))
+            w.writeheader()
+            w.writerows(rows)
+        return
     if args.slope or args.slope_cg:
         with threadpool_limits(1):
             workbench.run("memory_slab", h=0.5, k=0.5, progress=False)  # (warm-up)
