@@ -250,6 +250,17 @@ def test_edge_tol_resolves_the_contact_zone_s_edge_at_every_estimate_time():
     assert np.isclose(h[~near].max(), given_h[~given_near].max(), rtol=1e-9)
 
 
+def test_a_study_sweeps_edge_tol_and_takes_the_smallest_as_the_finest():
+    """edge_tol is a refinement axis of a Study: with two levels the reference is the smaller edge_tol (not the
+    first listed, as before edge_tol was one), and the other case is compared with it."""
+    with warnings.catch_warnings():
+        warnings.simplefilter("ignore", RuntimeWarning)  # (the finest-case reference of a two-level sweep is biased)
+        ds = workbench.Study("memory_hertz", h_contact=0.01, space_tol=0.2, space_adapt="during",
+                             sweep={"edge_tol": [0.2, 0.05]}, workers=0).run(progress=False)
+    error = ds.error.sel(edge_tol=[0.2, 0.05]).values.ravel()
+    assert error[0] > 0 and np.isnan(error[1]), error  # (0.05 is the reference, not reported)
+
+
 def test_a_continuation_from_a_checkpoint_is_the_run_straight_through(tmp_path, monkeypatch):
     """checkpoint_every with space_adapt = 'during': the checkpoints fall on estimate times that met the tolerance,
     so a continuation goes back where the run itself would; from the first checkpoint, on a mesh the run refined

@@ -68,7 +68,7 @@ MESH = ("nx", "ny", "nz", "h_contact")
 #: one reference; any other difference is physics).
 DISCRETISATION = frozenset(SPACE + TIME + CONTROL + ADAPT + EXPLICIT + MEMORY + MESH)
 #: The options along which a study fits an observed order (the finest value is the smallest).
-REFINEMENT = ("h", "k", "rtol", "h_contact", "space_tol")
+REFINEMENT = ("h", "k", "rtol", "h_contact", "space_tol", "edge_tol")
 #: The axes every study has (length 1 when not swept), and the command line's named options besides T.
 AXES = ("h", "k", "order", "scheme")
 

@@ -225,14 +225,15 @@ def make(spec, scene, cases, axes, layout=None):
         series = _series(cases, axes, layout)
         if series is None:
             raise ParameterError("reference = 'extrapolated' needs one refinement series of three levels or more (one "
-                                 "of h, k, rtol, h_contact, space_tol swept, or coupled levels such as k = 0.2 h)")
+                                 "of h, k, rtol, h_contact, space_tol, edge_tol swept, or coupled levels such as k = 0.2 h)")
         return DifferenceReference(cases, *series, describe=_EXTRAPOLATED)
     if isinstance(spec, str):
         if spec == "finest":
             # (error-controlled cases: the smallest tolerance; their k is only the first step)
-            # (adapted meshes: the smallest space_tol; 0 is the mesh as given, the coarsest)
+            # (adapted meshes: the smallest space_tol, then edge_tol; 0 is the mesh as given / the edge not asked)
             best = min(cases, key=lambda c: (c.h, c.get("h_contact", 0.0), c.get("space_tol", 0.0) or np.inf,
-                                             c.get("rtol", 0.0), c.k, -c.order, c.scheme != "implicit"))
+                                             c.get("edge_tol", 0.0) or np.inf, c.get("rtol", 0.0), c.k, -c.order,
+                                             c.scheme != "implicit"))
             values = {k: v for k, v in best.values().items() if k in DISCRETISATION}
             return RunReference(cases, values, listed=False, describe="finest")
         if spec in ("ode", "exact"):
