@@ -94,11 +94,9 @@ def run(scene=None, *, restart=None, checkpoint=None, progress=None, record_time
     _check_options(overrides, checkpoint, limit, threads, progress)
     _check_objects(record_times=record_times, times=times, model=model, restart=restart)
     sc, resume = _scene_and_archive(scene, restart, overrides, model)
-    if record_times is None and resume is not None:  # (a continuation records at the times its archive was given)
-        record_times = resume.record_times
     _check_checkpoint(sc, checkpoint)
     numerics = numerics_of.from_scene(sc, threads)
-    grid, sync = _grid(sc, numerics, times, record_times, resume)
+    grid, sync, record_times = _grid(sc, numerics, times, record_times, resume)
     model = _on_archived_mesh(model or sc.model_of(), resume)
     world = parallel.world()
     parallel.check(sc, model, numerics)
@@ -161,7 +159,10 @@ def _check_options(overrides: dict, checkpoint, limit, threads, progress=None) -
 
 
 def _grid(sc, numerics, times, record_times, resume):
-    """(the fixed-step grid, the times it must contain); a continued run's must start with the archive's."""
+    """(the fixed-step grid, the times it must contain, the times to record); a continued run's grid must start with
+    the archive's, and it records at the times its archive was given unless given others."""
+    if record_times is None and resume is not None:
+        record_times = resume.record_times
     sync = tuple(sc["snapshots"]) + (tuple(record_times) if record_times is not None else ())
     try:
         grid = time_grid(sc["T"], sc["k"], times, sync=sync)
@@ -169,7 +170,7 @@ def _grid(sc, numerics, times, record_times, resume):
         raise ParameterError(str(err)) from None
     if resume is not None and not numerics.adaptive:
         restarts.check_grid(resume.path, grid, resume.state, resume.archive)
-    return grid, sync
+    return grid, sync, record_times
 
 
 def _check_objects(record_times, times, model, restart) -> None:
