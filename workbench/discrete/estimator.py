@@ -215,10 +215,7 @@ class ContactEdge:
                             dtype=np.int64)
         self._facets = node[vertices]  # (each facet's contact nodes)
         corners = disc.vertex_xyz[vertices]
-        self._centroids = corners.mean(axis=1)
-        n = corners.shape[1]
-        self._sizes = np.max([np.linalg.norm(corners[:, i] - corners[:, j], axis=1)
-                              for i in range(n) for j in range(i)], axis=0)
+        self._centroids, self._sizes = corners.mean(axis=1), longest_edges(corners)
         self._weights, self._dim = disc.node_weights, disc.dim
 
     def measure(self, pressure) -> Edge | None:
@@ -233,6 +230,16 @@ class ContactEdge:
             return None
         zone = float(self._weights[pressed].sum()) ** (1.0 / (self._dim - 1))
         return Edge(float(self._sizes[across].max()) / zone, self._centroids[across], zone)
+
+
+def longest_edges(corners: np.ndarray) -> np.ndarray:
+    """The longest edge of each simplex, from its ``corners`` (simplices x vertices x coordinates).
+
+    >>> longest_edges(np.array([[[0.0, 0.0], [3.0, 0.0], [0.0, 4.0]]])).tolist()
+    [5.0]
+    """
+    n = corners.shape[1]
+    return np.max([np.linalg.norm(corners[:, i] - corners[:, j], axis=1) for i in range(n) for j in range(i)], axis=0)
 
 
 class RecoveredStrain:

@@ -29,6 +29,7 @@ import warnings
 import numpy as np
 import xarray as xr
 
+from ..discrete.estimator import longest_edges
 from ..input.geometry import on_mesh
 from ..input.meshes import to_text
 
@@ -125,9 +126,7 @@ def element_sizes(mesh):
     xyz = np.array(ngmesh.Coordinates()).reshape(mesh.nv, -1)[:, :mesh.dim]
     cells = np.array([[v.nr for v in el.vertices] for el in mesh.Elements()], dtype=np.int64)
     corners = xyz[cells]
-    n = cells.shape[1]
-    h = np.max([np.linalg.norm(corners[:, i] - corners[:, j], axis=1) for i in range(n) for j in range(i)], axis=0)
-    return corners.mean(axis=1), h
+    return corners.mean(axis=1), longest_edges(corners)
 
 
 def refine_toward(mesh, points: np.ndarray, size: float, max_dofs: int, grading: float | None = None):
