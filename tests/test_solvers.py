@@ -1,9 +1,11 @@
-"""The banded Cholesky (RCM order) solves the same systems as NGSolve's sparse Cholesky."""
+"""The banded Cholesky (RCM order) and MKL PARDISO's Cholesky solve the same systems as NGSolve's sparse Cholesky."""
 import numpy as np
 import pytest
 
 import workbench
-from workbench.discrete import discretisation, solvers
+from workbench.discrete import discretisation, pardiso, solvers
+
+SPARSE = "pardiso" if pardiso.AVAILABLE else "sparsecholesky"  # (what auto takes for a wide band)
 
 
 @pytest.mark.parametrize("name, kw", [("slab", dict(h=0.05)), ("block", dict(h=0.1)), ("tp1", dict(h=0.1)),
@@ -12,16 +14,17 @@ def test_banded_matches_sparsecholesky(name, kw):
     d = discretisation.build(workbench.scene(name, **kw))
     rhs = np.random.default_rng(0).standard_normal(d.ndof)
     out = {}
-    for method in ("banded", "sparsecholesky"):
+    for method in ("banded", "sparsecholesky") + (("pardiso",) if pardiso.AVAILABLE else ()):
         s = solvers.factor(d.viscous.mat, d.fes.FreeDofs(), d.u.vec, method)
         out[method] = np.zeros(d.ndof)
         s.solve(rhs, out[method])
     free = np.array(d.fes.FreeDofs(), dtype=bool)
     assert np.all(out["banded"][~free] == 0)
-    assert np.allclose(out["banded"], out["sparsecholesky"], rtol=1e-9, atol=1e-12 * np.abs(out["banded"]).max())
     K = solvers.to_scipy(d.viscous.mat)
-    residual = (K @ out["banded"] - rhs)[free]
-    assert np.abs(residual).max() < 1e-9 * np.abs(rhs).max()
+    for method, x in out.items():
+        assert np.all(x[~free] == 0)
+        assert np.allclose(x, out["sparsecholesky"], rtol=1e-9, atol=1e-12 * np.abs(x).max()), method
+        assert np.abs((K @ x - rhs)[free]).max() < 1e-9 * np.abs(rhs).max(), method
 
 
 def test_auto_takes_the_band_only_when_it_is_narrow_and_small(monkeypatch):
@@ -34,8 +37,10 @@ def test_auto_takes_the_band_only_when_it_is_narrow_and_small(monkeypatch):
     band = 8.0 * (bandwidth + 1) * free.size
     assert solvers.factor(d.viscous.mat, d.fes.FreeDofs(), d.u.vec).name == "banded"
     monkeypatch.setattr(solvers, "BAND_BYTES", 0.5 * band)
-    assert solvers.factor(d.viscous.mat, d.fes.FreeDofs(), d.u.vec).name == "sparsecholesky"
+    assert solvers.factor(d.viscous.mat, d.fes.FreeDofs(), d.u.vec).name == SPARSE
     assert solvers.factor(d.viscous.mat, d.fes.FreeDofs(), d.u.vec, "banded").name == "banded"  # asked for: kept
+    monkeypatch.setattr(pardiso, "AVAILABLE", False)  # (no MKL: NGSolve's own factor)
+    assert solvers.factor(d.viscous.mat, d.fes.FreeDofs(), d.u.vec).name == "sparsecholesky"
 
 
 @pytest.mark.parametrize("name, kw", [("block", dict(h=0.05, order=2)), ("slab", dict(h=0.00625))])
@@ -107,7 +112,7 @@ def test_auto_takes_cg_for_a_large_3d_explicit_run_only(monkeypatch):
     assert solvers.choose("auto", 3, direct.attrs["ndof"], True) == "cg"
     assert solvers.choose("auto", 3, direct.attrs["ndof"], False) == "auto"
     ds = workbench.run("block", progress=False, **kw)
-    assert direct.attrs["linear_solver"] == "sparsecholesky" and ds.attrs["linear_solver"] == "cg"
+    assert direct.attrs["linear_solver"] == SPARSE and ds.attrs["linear_solver"] == "cg"
     assert np.abs(ds.u_probe - direct.u_probe).max() < 1e-9 * np.abs(direct.u_probe).max()
     assert abs(ds.attrs["k_crit"] / direct.attrs["k_crit"] - 1) < 1e-6
     assert ds.cg_iterations[0] == 0 and (ds.cg_iterations[1:] > 0).all()

@@ -78,6 +78,15 @@ class CondensedSystem:
     contact points) instead of the dofs C, S0 = B M^{-1} B^T."""
 
     def __init__(self, solver, ndof: int, C: np.ndarray, chunk: int = 256, B=None):
+        S0_inv = solver.condensed_stiffness(C, B)  # (inside one factorization, where the solver can)
+        if S0_inv is None:
+            S0_inv = self._by_solves(solver, ndof, C, chunk, B)
+        self.S0_inv = 0.5 * (S0_inv + S0_inv.T)
+        self.S0_abs = np.abs(self.S0_inv)
+
+    @staticmethod
+    def _by_solves(solver, ndof: int, C: np.ndarray, chunk: int, B):
+        """S0^{-1} from S0 = (M^{-1})_CC or B M^{-1} B^T, formed one back-substitution per contact unknown."""
         m = C.size if B is None else B.shape[0]
         S0 = np.empty((m, m))
         for start in range(0, m, chunk):
@@ -90,9 +99,7 @@ class CondensedSystem:
                 R = B[start:start + chunk].T.toarray()
                 S0[:, start:start + R.shape[1]] = B @ solver.solve_many(R)
         S0 = 0.5 * (S0 + S0.T)
-        self.S0_inv = la.cho_solve(la.cho_factor(S0), np.eye(m)) if m else S0
-        self.S0_inv = 0.5 * (self.S0_inv + self.S0_inv.T)
-        self.S0_abs = np.abs(self.S0_inv)
+        return la.cho_solve(la.cho_factor(S0), np.eye(m)) if m else S0
 
 
 class SchurOperator:

@@ -84,12 +84,12 @@ _TABLE: dict[str, Param] = {p.name: p for p in [
        "0: not asked", lower=0.0, upper=0.5),
     _p("allow_unstable", False, "", "run the explicit scheme even when k exceeds its predicted stability limit",
        "flag"),
-    _p("solver", "auto", "", "linear solver for the constant matrix: banded Cholesky (RCM order), NGSolve's "
-       "sparsecholesky or umfpack, or cg (AMG-preconditioned conjugate gradients, no factor: the explicit scheme, and "
-       "the implicit ones with the coupled contact solver); auto = banded when the bandwidth is small, cg in 3D when "
+    _p("solver", "auto", "", "linear solver for the constant matrix: banded Cholesky (RCM order), MKL's pardiso "
+       "(a supernodal Cholesky, where the mkl wheel is installed), NGSolve's sparsecholesky or umfpack, or cg (AMG-preconditioned conjugate gradients, no factor: the explicit scheme, and "
+       "the implicit ones with the coupled contact solver); auto = banded when the bandwidth is small, else pardiso (sparsecholesky without MKL), cg in 3D when "
        "a sparse factor would exceed 2 GB (the explicit scheme, and the implicit ones unless contact_solver = "
        "condensed)",
-       "choice", choices=("auto", "banded", "sparsecholesky", "umfpack", "cg")),
+       "choice", choices=("auto", "banded", "pardiso", "sparsecholesky", "umfpack", "cg")),
     _p("contact_solver", "auto", "", "how an implicit step's contact problem is solved: condensed (the dense contact "
        "stiffness, one solve per contact point: fast for a few hundred points) or coupled (on the whole body, "
        "conjugate gradients on the active contact points, one back-substitution each: for thousands of points, "

@@ -19,6 +19,7 @@ from __future__ import annotations
 import math
 from dataclasses import dataclass
 
+from ..discrete import pardiso
 from ..errors import ParameterError
 from ..input.numerics import may_iterate
 
@@ -67,7 +68,11 @@ def estimate(geometry, order: int, solver: str = "auto", iterative: bool = False
 
 def resources(scene, model, n_steps: int, processes: int = 1) -> None:
     """Refuse, before any work, a run whose factorisation cannot fit in the free memory (on several MPI
-    ``processes`` each holds its part: the estimate of the whole does not apply)."""
+    ``processes`` each holds its part: the estimate of the whole does not apply); and ``solver = 'pardiso'`` where
+    MKL cannot be loaded."""
+    if scene["solver"] == "pardiso" and not pardiso.AVAILABLE:
+        raise ParameterError("solver = 'pardiso' needs Intel MKL, which could not be loaded here (pip install mkl, "
+                             "x86-64 only); solver = 'sparsecholesky' is NGSolve's own sparse factor")
     if processes > 1:
         return
     iterative = may_iterate(scene["scheme"], scene["contact_solver"])
