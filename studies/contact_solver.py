@@ -1,7 +1,7 @@
 """The contact solvers side by side: condensed (dense contact stiffness) against coupled (whole body, S never
 formed), on the same meshes, in one process, one thread each.
 
-    python studies/contact_solver.py [--out data/contact_solver] [--big] [--slope] [--slope-cg] [--pdas-amg]
+    python studies/contact_solver.py [--out data/contact_solver] [--big] [--slope] [--slope-cg] [--pdas-amg] [--pardiso]
 
 Per case and solver: dofs, contact points, steps, wall time of ``workbench.run`` (the mesh made once beforehand, so
 both pay the same), the setup time, back-substitutions (``linear_solves``), active-set and conjugate gradient
@@ -13,7 +13,9 @@ the cost of a step of the coupled solver against the dofs at three sizes of the 
 loop's wall time over its steps, and the least-squares slope in log-log (``slope.csv``). ``--slope-cg`` (alone): the
 same for ``memory_block`` to T = 0.3 at four sizes (4k to 78k dofs), with the sparse factor (``solver = "auto"``) and
 with AMG-preconditioned conjugate gradients (``solver = "cg"``), side by side (``slope_cg.csv``; about 12 minutes).
-``--pdas-amg`` (alone): a route measured and not taken, the active set on the whole body with AMG-CG solves
+``--pardiso`` (alone; with ``--big`` also the 47k hemisphere): both contact solvers on NGSolve's factor and on MKL
+PARDISO's, beside the yardsticks: one factorization with each, a back-substitution with each, and PARDISO's Schur
+complement on the contact points (``pardiso.csv``). ``--pdas-amg`` (alone): a route measured and not taken, the active set on the whole body with AMG-CG solves
 (:func:`pdas_amg`, ``pdas_amg.csv``).
 """
 from __future__ import annotations
@@ -171,6 +173,55 @@ def pdas_amg(rows, sizes=(0.01, 0.005)) -> None:
         print(rows[-1], flush=True)
 
 
+def yardsticks(name, overrides):
+    """Seconds to factor K (the step's matrix without memory) once with NGSolve's sparse Cholesky and with MKL PARDISO
+    (analysis and factorization), a back-substitution with each, and PARDISO's Schur complement on the contact
+    points (the condensed stiffness the condensed solver needs), one thread, the mesh of the case."""
+    from workbench.discrete import discretisation, pardiso, solvers
+    from workbench.schemes.contact_nodes import ContactNodes
+
+    d = discretisation.build(workbench.scene(name, **overrides))
+    discretisation.assemble(d)
+    out, rhs = {}, np.random.default_rng(0).standard_normal(d.ndof)
+    for method in ("sparsecholesky", "pardiso"):
+        t0 = time.perf_counter()
+        s = solvers.factor(d.elastic.mat, d.fes.FreeDofs(), d.u.vec, method)
+        out[f"factor_{method}"] = round(time.perf_counter() - t0, 3)
+        x, times = np.zeros(d.ndof), []
+        for _ in range(5):
+            t0 = time.perf_counter()
+            s.solve(rhs, x)
+            times.append(time.perf_counter() - t0)
+        out[f"backsub_{method}"] = round(float(np.median(times)), 5)
+    if d.scene["scheme"] == "vi":  # (Model B: its contact points)
+        nodes = ContactNodes(d)
+        t0 = time.perf_counter()
+        s.condensed_stiffness(nodes.C, nodes.B)
+        out["schur"] = round(time.perf_counter() - t0, 3)
+        out["schur_by_solves_estimate"] = round(nodes.size * out["backsub_sparsecholesky"], 2)
+    out["mkl"] = pardiso.AVAILABLE
+    return out
+
+
+def with_pardiso(rows, cases) -> None:
+    """Each case with both contact solvers on NGSolve's sparse Cholesky and on PARDISO (``solver = "pardiso"``), and
+    the yardsticks (:func:`yardsticks`); the condensed solver on NGSolve's factor is left out at 47k dofs (783 s)."""
+    for name, overrides in cases:
+        workbench.scene(name, **overrides)
+        sticks = yardsticks(name, overrides)
+        print(name, overrides, sticks, flush=True)
+        for contact in ("condensed", "coupled"):
+            for factor in ("sparsecholesky", "pardiso"):
+                if (name, overrides) in BIG and (contact, factor) == ("condensed", "sparsecholesky"):
+                    continue
+                row, ds = one(name, dict(overrides, solver=factor), contact)
+                row.update(sticks, factor=factor,
+                           over_ngsolve_factor=round(row["wall"] / sticks["factor_sparsecholesky"], 1),
+                           over_pardiso_factor=round(row["wall"] / sticks["factor_pardiso"], 1))
+                rows.append(row)
+                print(row, flush=True)
+
+
 def table(rows) -> str:
     """The markdown table of docs/schemes.md from the rows of one run."""
     by = {}
@@ -196,10 +247,22 @@ def main():
     p.add_argument("--slope-cg", action="store_true", help="the same, factor against CG (slope_cg.csv)")
     p.add_argument("--pdas-amg", action="store_true", help="only the active set on the whole body with AMG-CG, one "
                    "load step of the hemisphere (pdas_amg.csv)")
+    p.add_argument("--pardiso", action="store_true", help="only both contact solvers on NGSolve's factor and on "
+                   "MKL PARDISO, with --big the hemisphere at 47k dofs too (pardiso.csv)")
     args = p.parse_args()
     out = Path(args.out)
     out.mkdir(parents=True, exist_ok=True)
     rows = []
+    if args.pardiso:
+        with threadpool_limits(1):
+            workbench.run("memory_slab", h=0.5, k=0.5, progress=False)  # (warm-up)
+            with_pardiso(rows, CASES + (BIG if args.big else []))
+        keys = list(dict.fromkeys(k for r in rows for k in r))
+        with open(out / "pardiso.csv", "w", newline="") as f:
+            w = csv.DictWriter(f, fieldnames=keys)
+            w.writeheader()
+            w.writerows(rows)
+        return
     if args.pdas_amg:
         with threadpool_limits(1):
             pdas_amg(rows)

@@ -22,6 +22,7 @@ Examples
 from __future__ import annotations
 
 import numpy as np
+from scipy.linalg import cho_factor, cho_solve
 
 SEPARATED, STUCK, COMPLIANT, RIGID = 0, 1, 2, 3
 
@@ -71,21 +72,22 @@ def solve_states(S_inv, s_free, w, F, c, g, states):
     The body's response is lam = S_inv (s_free - s) (S_inv: the contact
     stiffness seen by the contact nodes; s_free: where they would be without
     contact). Each node adds the equation of its state. Returns (s, lam).
+    Only the nodes whose position is unknown (separated, compliant) are solved for, by a Cholesky factor: their
+    block of S_inv plus the compliant nodes' w c is symmetric positive definite.
     """
-    A = np.array(S_inv, dtype=float)  # rows: lam_i(s) - (law) = 0
-    b = S_inv @ s_free
     fix = (states == STUCK) | (states == RIGID)
     sep = states == SEPARATED
-    comp = states == COMPLIANT
-    # separated: lam_i = 0  ->  (S_inv s)_i = (S_inv s_free)_i          (rows as they are)
-    # compliant: lam_i = w (F + c s_i)  ->  (S_inv s)_i + w c s_i = (S_inv s_free)_i - w F
-    A[comp, comp] += w[comp] * c
-    b[comp] -= w[comp] * F
-    # stuck / rigid: s_i = 0 / g
-    A[fix] = 0.0
-    A[fix, fix] = 1.0
-    b[fix] = np.where(states[fix] == RIGID, g, 0.0)
-    s = np.linalg.solve(A, b)
+    comp = states[~fix] == COMPLIANT
+    s = np.where(states == RIGID, g, 0.0)  # stuck / rigid: s_i = 0 / g
+    free = np.flatnonzero(~fix)
+    if free.size:
+        # separated: lam_i = 0  ->  (S_inv s)_i = (S_inv s_free)_i
+        # compliant: lam_i = w (F + c s_i)  ->  (S_inv s)_i + w c s_i = (S_inv s_free)_i - w F
+        A = S_inv[np.ix_(free, free)]
+        A[np.flatnonzero(comp), np.flatnonzero(comp)] += w[free][comp] * c
+        b = S_inv[free] @ s_free - S_inv[np.ix_(free, np.flatnonzero(fix))] @ s[fix]
+        b[comp] -= w[free][comp] * F
+        s[free] = cho_solve(cho_factor(A, check_finite=False), b, check_finite=False)
     lam = S_inv @ (s_free - s)
     lam[sep] = 0.0  # exactly zero by its equation; remove round-off
     return s, lam
