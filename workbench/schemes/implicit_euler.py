@@ -84,7 +84,7 @@ class ImplicitEuler(ErrorControlled, KelvinVoigtScheme):
         self.contact = size > 0
         self.exchange.bind(self.op.C if self.op is not None else ())
         self.method = d.step_solver()
-        self.coupled = self.contact and d.numerics.coupled_contact(size, self.method)
+        self.coupled = self.contact and d.numerics.coupled_contact(size, self.method, d.forms_schur(self.method))
         self.bonding = d.model.bonding
         self._factors = OrderedDict()
         self.newton = None  # (the step's, from _prepare)
