@@ -131,14 +131,6 @@ class Discretisation:
         n = self.numerics
         return solvers.choose(n.solver, self.dim, self.ndof, iterative=may_iterate(n.scheme, n.contact_solver))
 
-    def forms_schur(self, method: str) -> bool:
-        """Whether the step factor ``method`` forms a condensed contact stiffness inside one factorization (MKL
-        PARDISO's Schur complement, from the banded and the PARDISO factors where MKL loads; not the distributed
-        solvers)."""
-        from . import pardiso
-
-        return pardiso.AVAILABLE and method in ("auto", "banded", "pardiso")
-
     def step_factor(self, M):
         """The solver of an implicit step's operator ``M`` (assembled on K_A's pattern) by :meth:`step_solver`."""
         from . import solvers

@@ -303,6 +303,13 @@ def choose(method: str, dim: int, ndof: int, iterative: bool) -> str:
     return method
 
 
+def forms_schur(method: str) -> bool:
+    """Whether the factor ``method`` resolves to forms a condensed contact stiffness inside one factorization (MKL
+    PARDISO's Schur complement: the banded and the PARDISO factors, where MKL loads; a distributed body's solvers
+    do not, and their methods are never these)."""
+    return pardiso.AVAILABLE and method in ("auto", "banded", "pardiso")
+
+
 def factor(mat, freedofs, vector, method: str = "auto", fes=None):
     """Factor an NGSolve SPD matrix on ``freedofs`` with ``method`` (see module docs); ``cg`` needs the displacement
     space ``fes`` (for the rigid-body modes)."""

@@ -91,9 +91,10 @@ _TABLE: dict[str, Param] = {p.name: p for p in [
        "condensed)",
        "choice", choices=("auto", "banded", "pardiso", "sparsecholesky", "umfpack", "cg")),
     _p("contact_solver", "auto", "", "how an implicit step's contact problem is solved: condensed (the dense contact "
-       "stiffness, one solve per contact point: fast for a few hundred points) or coupled (on the whole body, "
+       "stiffness, made inside one factorization where MKL loads, else one solve per contact point) or coupled (on the whole body, "
        "conjugate gradients on the active contact points, one back-substitution each: for thousands of points, "
-       "3D); auto = coupled when the contact points outnumber 20 x the steps, or 5000", "choice",
+       "3D); auto = coupled from 2500 contact unknowns where the factor forms the condensed stiffness inside one "
+       "factorization (MKL), else when they outnumber 20 x the steps, or 5000", "choice",
        choices=("auto", "condensed", "coupled")),
     # material
     _p("E", 1000.0, "Pa", "Young's modulus (elasticity G)", **_POS),

@@ -39,6 +39,7 @@ from collections import OrderedDict
 
 import numpy as np
 
+from ..discrete import solvers
 from ..discrete.condensation import CondensedNewton, CondensedSystem, ContactOperator, CoupledNewton, SchurOperator
 from ..physics.ops import NP
 from .base import ErrorControlled
@@ -84,7 +85,7 @@ class ImplicitEuler(ErrorControlled, KelvinVoigtScheme):
         self.contact = size > 0
         self.exchange.bind(self.op.C if self.op is not None else ())
         self.method = d.step_solver()
-        self.coupled = self.contact and d.numerics.coupled_contact(size, self.method, d.forms_schur(self.method))
+        self.coupled = self.contact and d.numerics.coupled_contact(size, self.method, solvers.forms_schur(self.method))
         self.bonding = d.model.bonding
         self._factors = OrderedDict()
         self.newton = None  # (the step's, from _prepare)

@@ -48,6 +48,7 @@ from collections import OrderedDict
 
 import numpy as np
 
+from ..discrete import solvers
 from ..discrete.condensation import CondensedSystem, SchurOperator
 from ..physics import unilateral
 from .base import ErrorControlled, Observer, Scheme, first_event
@@ -85,7 +86,7 @@ class MemoryVI(ErrorControlled, Scheme):
         x.bind(self.nodes.C if x.solves else ())
         self.method = d.step_solver()
         self.coupled = None
-        if d.numerics.coupled_contact(self.size, self.method, d.forms_schur(self.method)):
+        if d.numerics.coupled_contact(self.size, self.method, solvers.forms_schur(self.method)):
             self.coupled = CoupledActiveSet(self.nodes) if x.solves else True
         self.memory = rule_for(d, self.trapezoid)  # (None without memory)
         self._balance = None  # f - memory of the last equilibrium (only for the reaction of pinned contact nodes)
