@@ -13,6 +13,7 @@ the cost of a step of the coupled solver against the dofs at three sizes of the 
 loop's wall time over its steps, and the least-squares slope in log-log (``slope.csv``). ``--slope-cg`` (alone): the
 same for ``memory_block`` to T = 0.3 at four sizes (4k to 78k dofs), with the sparse factor (``solver = "auto"``) and
 with AMG-preconditioned conjugate gradients (``solver = "cg"``), side by side (``slope_cg.csv``; about 12 minutes).
+``--slope-auto`` (alone): the same four sizes with the contact solver ``auto`` takes (``slope_auto.csv``).
 ``--pardiso`` (alone; with ``--big`` also the 47k hemisphere): both contact solvers on NGSolve's factor and on MKL
 PARDISO's, beside the yardsticks: one factorization with each, a back-substitution with each, and PARDISO's Schur
 complement on the contact points (``pardiso.csv``). ``--pdas-amg`` (alone): a route measured and not taken, the active set on the whole body with AMG-CG solves
@@ -82,16 +83,21 @@ SLOPE_CG = [(f"memory_block, solver = {solver}", "memory_block", [dict(h=h, T=0.
             for solver in ("auto", "cg")]
 
 
-def slope(rows, cases=None) -> None:
-    """The time loop's cost per step (coupled solver, one thread) against the dofs, and its log-log slope (over all
-    sizes, and ``slope_last`` over the last two)."""
+SLOPE_AUTO = [("memory_block, contact_solver = auto", "memory_block",
+               [dict(h=h, T=0.3) for h in (0.1, 0.07, 0.05, 0.035)])]
+
+
+def slope(rows, cases=None, contact="coupled") -> None:
+    """The time loop's cost per step (the ``contact`` solver, one thread) against the dofs, and its log-log slope (over
+    all sizes, and ``slope_last`` over the last two); ``whole_per_step``: the whole run's wall time over its steps."""
     for label, name, sizes in cases or [(name, name, sizes) for name, sizes in SLOPE]:
         mine = []
         for overrides in sizes:
-            row, ds = one(name, overrides, "coupled")
+            row, ds = one(name, overrides, contact)
             row.update(loop=round(float(ds.attrs["wall_time"]), 3),
                        per_step=round(float(ds.attrs["wall_time"]) / row["steps"], 4),
-                       backsubs_per_step=round(row["backsubs"] / row["steps"], 1))
+                       backsubs_per_step=round(row["backsubs"] / row["steps"], 1),
+                       whole_per_step=round(row["wall"] / row["steps"], 4))
             mine.append(row)
             print(row, flush=True)
         fit = np.polyfit(np.log([r["ndof"] for r in mine]), np.log([r["per_step"] for r in mine]), 1)[0]
@@ -245,6 +251,7 @@ def main():
     p.add_argument("--big", action="store_true")
     p.add_argument("--slope", action="store_true", help="only the cost of a step against the dofs (slope.csv)")
     p.add_argument("--slope-cg", action="store_true", help="the same, factor against CG (slope_cg.csv)")
+    p.add_argument("--slope-auto", action="store_true", help="the same, the contact solver auto takes (slope_auto.csv)")
     p.add_argument("--pdas-amg", action="store_true", help="only the active set on the whole body with AMG-CG, one "
                    "load step of the hemisphere (pdas_amg.csv)")
     p.add_argument("--pardiso", action="store_true", help="only both contact solvers on NGSolve's factor and on "
@@ -271,11 +278,15 @@ def main():
             w.writeheader()
             w.writerows(rows)
         return
-    if args.slope or args.slope_cg:
+    if args.slope or args.slope_cg or args.slope_auto:
         with threadpool_limits(1):
             workbench.run("memory_slab", h=0.5, k=0.5, progress=False)  # (warm-up)
-            slope(rows, SLOPE_CG if args.slope_cg else None)
-        with open(out / ("slope_cg.csv" if args.slope_cg else "slope.csv"), "w", newline="") as f:
+            if args.slope_auto:
+                slope(rows, SLOPE_AUTO, "auto")
+            else:
+                slope(rows, SLOPE_CG if args.slope_cg else None)
+        name = "slope_auto.csv" if args.slope_auto else "slope_cg.csv" if args.slope_cg else "slope.csv"
+        with open(out / name, "w", newline="") as f:
             w = csv.DictWriter(f, fieldnames=list(rows[-1]))
             w.writeheader()
             w.writerows(rows)
