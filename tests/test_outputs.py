@@ -106,3 +106,19 @@ def test_run_with_output_prints_one_status_line(tmp_path):
     lines = [li for li in p.stdout.splitlines() if li.strip()]
     assert len(lines) == 2 and lines[1].startswith("wrote "), p.stdout
     assert lines[0].startswith("tp1: complete, 20 steps") and " s " in lines[0], p.stdout
+
+
+@pytest.mark.parametrize("name, kw", [("memory_hertz3d", {}), ("slab", dict(h=0.1)), ("block", dict(h=0.1, order=1))])
+def test_the_p1_strain_operator_from_the_cells_equals_the_assembled_cell_means(name, kw):
+    """The P1 strain per cell from the barycentric gradients (what a 3D run's snapshots use: 0.1 s against 2.3 s at
+    47k dofs) against NGSolve's mixed forms integrating eps(u) over each cell."""
+    from workbench.discrete import discretisation
+
+    with warnings.catch_warnings():
+        warnings.simplefilter("ignore")  # (P1 on the thin block)
+        d = discretisation.build(workbench.scene(name, **kw))
+    u = np.random.default_rng(0).standard_normal(d.ndof)
+    fast, assembled = d.fields._p1_strains(), d.fields._assembled_strains()
+    assert len(fast) == len(assembled) == {2: 3, 3: 6}[d.dim]
+    for A, B in zip(fast, assembled):
+        assert np.abs(A @ u - B @ u).max() < 1e-12 * np.abs(B @ u).max()

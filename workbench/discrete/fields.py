@@ -60,7 +60,37 @@ class FieldOperators:
     @cached_property
     def strain_operator(self):
         """E with (E u)[cell, c] = the mean over the cell of the strain component c (COMPONENTS order): the P0
-        projection of eps(u), assembled once (the reported stress is linear in it)."""
+        projection of eps(u), assembled once (the reported stress is linear in it). P1 vectors on straight simplices
+        (a constant strain per cell) take it from the cells' geometry (:meth:`_p1_strains`: 0.1 s against 2.3 s for
+        the mixed forms on the 3D hemisphere at 47k dofs, measured)."""
+        d = self.d
+        if d.dim > 1 and d.scene["order"] == 1 and d.ndof == d.dim * len(d.vertex_xyz):
+            return self._p1_strains()
+        return self._assembled_strains()
+
+    def _p1_strains(self):
+        """The P1 strain operator from the gradients of the barycentric coordinates: on a cell with vertices x_0..x_d
+        and J = [x_1 - x_0, ..., x_d - x_0] (rows), grad lambda_i is column i of J^-1 (i >= 1) and grad lambda_0 =
+        -sum of them; the displacement dof of vertex v, component a, is a * (vertices) + v (VectorH1)."""
+        import scipy.sparse as sp
+
+        d, cells = self.d, self.cells
+        nv, nc, dim = len(d.vertex_xyz), len(self.cells), d.dim
+        X = d.vertex_xyz[cells][:, :, :dim]
+        inverse = np.linalg.inv(X[:, 1:, :] - X[:, :1, :])  # (cell, b, i): d lambda_i / d x_b, i = 1..d
+        grads = np.concatenate([-inverse.sum(axis=2, keepdims=True), inverse], axis=2)  # (cell, b, vertex k)
+        row = np.repeat(np.arange(nc), dim + 1)
+        blocks = []
+        for i, j in kelvin_voigt.COMPONENTS[dim]:
+            # eps_ij = (d_j u_i + d_i u_j) / 2
+            parts = [(cells + i * nv, 0.5 * grads[:, j, :]), (cells + j * nv, 0.5 * grads[:, i, :])]
+            cols = np.concatenate([c.ravel() for c, _ in parts])
+            vals = np.concatenate([v.ravel() for _, v in parts])
+            blocks.append(sp.csr_matrix((vals, (np.concatenate([row, row]), cols)), shape=(nc, d.ndof)))
+        return blocks
+
+    def _assembled_strains(self):
+        """The strain operator by NGSolve's mixed forms (any order, the rod)."""
         import scipy.sparse as sp
 
         q = ngs.L2(self.d.mesh, order=0)
