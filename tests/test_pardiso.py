@@ -1,5 +1,7 @@
 """MKL PARDISO (ctypes): its factor, its Schur complements, and the condensed contact stiffness made inside one
 factorization instead of one back-substitution per contact point, against dense linear algebra and the solves."""
+import sys
+
 import numpy as np
 import pytest
 import scipy.sparse as sp
@@ -8,7 +10,7 @@ import workbench
 from workbench.discrete import condensation, discretisation, pardiso, solvers
 from workbench.errors import ParameterError
 
-needs_mkl = pytest.mark.skipif(not pardiso.AVAILABLE, reason="MKL could not be loaded")
+needs_mkl = pytest.mark.skipif(not pardiso.available(), reason="MKL could not be loaded")
 
 
 def _spd(n=400, seed=0):
@@ -76,8 +78,20 @@ def test_a_run_with_pardiso_equals_the_run_with_ngsolves_factor():
 
 
 def test_without_mkl_pardiso_is_refused_before_any_work_and_auto_keeps_ngsolves_factor(monkeypatch):
-    monkeypatch.setattr(pardiso, "AVAILABLE", False)
+    monkeypatch.setattr(pardiso, "available", lambda: False)
     with pytest.raises(ParameterError, match="solver = 'pardiso' needs Intel MKL"):
         workbench.run("memory_hertz3d", solver="pardiso", progress=False)
     ds = workbench.run("memory_hertz3d", progress=False)
     assert ds.attrs["linear_solver"] == "sparsecholesky"
+
+
+@pytest.mark.skipif(not sys.platform.startswith("linux"), reason="reads /proc/self/maps")
+def test_import_workbench_does_not_load_mkl():
+    """MKL is loaded at its first use in a run, so importing workbench leaves a user's process (and an MKL it may
+    load later, with its own threading) as it was."""
+    import subprocess
+
+    code = "import workbench; print('libmkl' in open('/proc/self/maps').read())"
+    out = subprocess.run([sys.executable, "-c", code], capture_output=True, text=True, timeout=600)
+    assert out.returncode == 0, out.stderr
+    assert out.stdout.strip() == "False"

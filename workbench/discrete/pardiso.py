@@ -7,17 +7,18 @@ analyses and factors K in 1.3 s against 2.5 s for NGSolve's ``sparsecholesky``, 
 contact solver needs: K's condensed stiffness on the 5185 contact dofs took 9 s, against one back-substitution per
 contact dof (674 s with NGSolve's factor). (``studies/contact_solver.py --pardiso``.)
 
-MKL comes from the ``mkl`` wheel on x86-64 (a dependency of workbench there). Where it cannot be loaded,
-:data:`AVAILABLE` is False and workbench keeps NGSolve's factor and forms condensed stiffnesses by back-substitution.
-The 64-bit integer entry point (``pardiso_64``) is called, so MKL's interface layer does not matter. Every call runs
-with one MKL thread (``mkl_set_num_threads_local``), as workbench holds every BLAS pool at one thread while it
-computes (:mod:`workbench.running.threads`).
+MKL comes from the ``mkl`` wheel on x86-64 (a dependency of workbench there), loaded at the first use. Where it
+cannot be loaded, :func:`available` is False and workbench keeps NGSolve's factor and forms condensed stiffnesses by
+back-substitution. The 64-bit integer entry point (``pardiso_64``) is called, so MKL's interface layer does not
+matter. Every call runs with one MKL thread (``mkl_set_num_threads_local``, given back after the call), as workbench
+holds every BLAS pool at one thread while it computes (:mod:`workbench.running.threads`); MKL's threading layer is
+left as the process has it.
 
 Examples
 --------
 >>> import numpy as np, scipy.sparse as sp
 >>> K = sp.diags([-1.0, 2.0, -1.0], [-1, 0, 1], shape=(4, 4)).tocsr()
->>> if AVAILABLE:
+>>> if available():
 ...     print(Factor(K).solve(np.ones(4)).round(6).tolist(), schur_complement(K, np.array([3])).round(6).tolist())
 ... else:
 ...     print([2.0, 3.0, 3.0, 2.0], [[1.25]])
@@ -36,8 +37,6 @@ import scipy.sparse as sp
 
 #: PARDISO's matrix types used here: real symmetric positive definite, real symmetric indefinite.
 SPD, SYMMETRIC = 2, -2
-#: MKL's sequential threading layer (``MKL_THREADING_SEQUENTIAL``).
-_SEQUENTIAL = 1
 
 
 def _load():
@@ -56,17 +55,23 @@ def _load():
             lib.pardiso_64  # noqa: B018 (raises AttributeError where the entry point is missing)
         except (OSError, AttributeError):
             continue
-        # no OpenMP pool of MKL's own beside NGSolve's and OpenBLAS's: sequential, where MKL was not yet used
-        lib.MKL_Set_Threading_Layer(ctypes.c_int(_SEQUENTIAL))
         lib.MKL_Set_Num_Threads_Local.restype = ctypes.c_int
         lib.pardiso_64.restype = None
         return lib
     return None
 
 
-_LIB = _load()
-#: Whether MKL PARDISO could be loaded.
-AVAILABLE = _LIB is not None
+_LIB = None
+_LOADED = False
+
+
+def available() -> bool:
+    """Whether MKL PARDISO can be used here. MKL is loaded at the first call, not at ``import workbench``, which
+    leaves the user's process as it was."""
+    global _LIB, _LOADED
+    if not _LOADED:
+        _LIB, _LOADED = _load(), True
+    return _LIB is not None
 
 
 def _release(pt: np.ndarray, mtype: int, n: int, iparm: np.ndarray) -> None:
@@ -129,7 +134,7 @@ class Factor:
     """
 
     def __init__(self, A: sp.spmatrix):
-        if not AVAILABLE:
+        if not available():
             raise RuntimeError("MKL PARDISO is not available here (install the 'mkl' wheel)")
         self.n = A.shape[0]
         self._matrix = _upper(A)
@@ -186,7 +191,7 @@ def compliance(A: sp.spmatrix, B: sp.spmatrix) -> np.ndarray:
 
 def _schur(matrix, n: int, mtype: int, keep: np.ndarray) -> np.ndarray:
     """The dense Schur complement on the sorted unknowns ``keep`` (one handle, released at once)."""
-    if not AVAILABLE:
+    if not available():
         raise RuntimeError("MKL PARDISO is not available here (install the 'mkl' wheel)")
     pt, iparm = np.zeros(64, dtype=np.int64), _parameters(True)
     perm = np.zeros(n, dtype=np.int64)

@@ -92,7 +92,7 @@ class _HoldsMatrix:
     complement, where MKL is available (:meth:`Solver.condensed_stiffness`)."""
 
     def condensed_stiffness(self, C: np.ndarray, B=None):
-        if not pardiso.AVAILABLE:
+        if not pardiso.available():
             return None
         where = np.full(self.size, -1, dtype=np.int64)
         where[self.free] = np.arange(self.free.size)
@@ -145,7 +145,7 @@ class PardisoCholesky(_HoldsMatrix, Solver):
     """MKL PARDISO's supernodal Cholesky of ``K[free][:, free]``, METIS-ordered (:mod:`workbench.discrete.pardiso`).
 
     >>> K = sp.diags([-1.0, 2.0, -1.0], [-1, 0, 1], shape=(5, 5)).tocsr()
-    >>> if pardiso.AVAILABLE:
+    >>> if pardiso.available():
     ...     s = PardisoCholesky(K, np.arange(1, 5)); out = np.zeros(5); s.solve(np.ones(5), out)
     ...     print(out.round(3).tolist())
     ... else:
@@ -307,7 +307,7 @@ def forms_schur(method: str) -> bool:
     """Whether the factor ``method`` resolves to forms a condensed contact stiffness inside one factorization (MKL
     PARDISO's Schur complement: the banded and the PARDISO factors, where MKL loads; a distributed body's solvers
     do not, and their methods are never these)."""
-    return pardiso.AVAILABLE and method in ("auto", "banded", "pardiso")
+    return pardiso.available() and method in ("auto", "banded", "pardiso")
 
 
 def factor(mat, freedofs, vector, method: str = "auto", fes=None):
@@ -328,9 +328,9 @@ def factor(mat, freedofs, vector, method: str = "auto", fes=None):
         narrow = bandwidth <= max(64, 0.02 * free.size) and 8.0 * (bandwidth + 1) * free.size <= BAND_BYTES
         if method == "banded" or narrow:
             return BandedCholesky(K, free, perm)
-        method = "pardiso" if pardiso.AVAILABLE else "sparsecholesky"
+        method = "pardiso" if pardiso.available() else "sparsecholesky"
     if method == "pardiso":
-        if not pardiso.AVAILABLE:
+        if not pardiso.available():
             raise ValueError("solver = 'pardiso' needs MKL (pip install mkl); 'sparsecholesky' is NGSolve's own")
         return PardisoCholesky(to_scipy(mat) if K is None else K, free)
     return NGSolveDirect(mat, freedofs, method, vector)

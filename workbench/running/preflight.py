@@ -70,7 +70,7 @@ def resources(scene, model, n_steps: int, processes: int = 1) -> None:
     """Refuse, before any work, a run whose factorisation cannot fit in the free memory (on several MPI
     ``processes`` each holds its part: the estimate of the whole does not apply); and ``solver = 'pardiso'`` where
     MKL cannot be loaded."""
-    if scene["solver"] == "pardiso" and not pardiso.AVAILABLE:
+    if scene["solver"] == "pardiso" and not pardiso.available():
         raise ParameterError("solver = 'pardiso' needs Intel MKL, which could not be loaded here (pip install mkl, "
                              "x86-64 only); solver = 'sparsecholesky' is NGSolve's own sparse factor")
     if processes > 1:
