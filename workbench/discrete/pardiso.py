@@ -2,10 +2,10 @@
 chosen unknowns, computed inside its factorization.
 
 Why. On the 3D Hertz hemisphere at 46,938 dofs (one thread, in one process) PARDISO, with METIS ordering,
-analyses and factors K in 1.3 s against 2.5 s for NGSolve's ``sparsecholesky``, and solves in 0.052 s against
-0.084 s. Sixteen right-hand sides together take 0.34 s, 0.021 s each. Its Schur complement is what the condensed
-contact solver needs: K's condensed stiffness on the 5185 contact dofs took 9 s, against one back-substitution per
-contact dof (674 s with NGSolve's factor). (``studies/contact_solver.py --pardiso``.)
+analyses and factors K in 1.16 s against 1.40 s for NGSolve's ``sparsecholesky``, and solves in 0.021 s against
+0.070 s. Its Schur complement is what the condensed contact solver needs: K's condensed stiffness on the 5186
+contact points took 4.7 s, against one back-substitution per point (an estimated 360 s with NGSolve's factor;
+674 s measured when issue 22 was filed). (``python studies/contact_solver.py --pardiso --big``.)
 
 MKL comes from the ``mkl`` wheel on x86-64 (a dependency of workbench there), loaded at the first use. Where it
 cannot be loaded, :func:`available` is False and workbench keeps NGSolve's factor and forms condensed stiffnesses by
@@ -30,6 +30,7 @@ from __future__ import annotations
 import ctypes
 import glob
 import os
+import site
 import sys
 import weakref
 
@@ -43,8 +44,6 @@ SPD, SYMMETRIC = 2, -2
 def _load():
     """libmkl_rt from the environment's ``lib`` (the ``mkl`` wheel puts it there) or the loader's path; None if absent."""
     names = []
-    import site
-
     user = site.USER_BASE or ""  # (pip install --user puts the wheel's libraries there)
     for prefix in dict.fromkeys((sys.prefix, sys.base_prefix, user, os.environ.get("CONDA_PREFIX", ""))):
         if prefix:

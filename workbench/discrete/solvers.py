@@ -5,7 +5,7 @@ banded Cholesky (``dpbtrf``/``dpbtrs`` via SciPy). On thin domains (the paper's
 slab) the bandwidth is ~2 (ny + 1) and a back-substitution is 2–4x faster than
 NGSolve's ``sparsecholesky`` (measured in ``studies/bench_explicit_step.py``).
 ``pardiso``: MKL PARDISO's supernodal Cholesky, METIS-ordered (:mod:`workbench.discrete.pardiso`): on the 3D
-hemisphere at 47k dofs it factors in half the time of NGSolve's ``sparsecholesky`` and solves 1.6x faster, and it
+hemisphere at 47k dofs it factors 1.2x and solves 3.3x faster than NGSolve's ``sparsecholesky``, and it
 forms a condensed contact stiffness inside one factorization (:meth:`Solver.condensed_stiffness`). ``auto`` takes
 it where the band is wide, when MKL can be loaded.
 ``sparsecholesky`` / ``umfpack``: NGSolve's own direct solvers.

@@ -83,8 +83,8 @@ def solve_states(S_inv, s_free, w, F, c, g, states):
     if free.size:
         # separated: lam_i = 0  ->  (S_inv s)_i = (S_inv s_free)_i
         # compliant: lam_i = w (F + c s_i)  ->  (S_inv s)_i + w c s_i = (S_inv s_free)_i - w F
-        A = S_inv[np.ix_(free, free)]
-        A[np.flatnonzero(comp), np.flatnonzero(comp)] += w[free][comp] * c
+        A, at = S_inv[np.ix_(free, free)], np.flatnonzero(comp)  # (a copy)
+        A[at, at] += w[free][comp] * c
         b = S_inv[free] @ s_free - S_inv[np.ix_(free, np.flatnonzero(fix))] @ s[fix]
         b[comp] -= w[free][comp] * F
         s[free] = cho_solve(cho_factor(A, check_finite=False), b, check_finite=False)
