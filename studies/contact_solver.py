@@ -8,7 +8,8 @@ both pay the same), the setup time, back-substitutions (``linear_solves``), acti
 iterations (Model A: Newton iterations; its back-substitutions are not counted: -1), and the largest difference between the two solvers' contact displacements (relative). Beside them the
 cost of assembling and factoring K alone (NGSolve's sparse Cholesky, the yardstick of issue 22). ``--big`` adds the
 hemisphere at h_contact = 0.005 (47k dofs, 5186 contact vertices), coupled only (condensed: 783 s, measured before,
-``data/hertz/hertz3d_fine.csv``). Writes ``summary.csv`` and prints the table of docs/schemes.md. ``--slope`` (alone):
+``data/hertz/hertz3d_fine.csv``). Writes ``summary.csv`` and prints its table (the table of docs/schemes.md now
+comes from ``--pardiso``, which runs both factors side by side). ``--slope`` (alone):
 the cost of a step of the coupled solver against the dofs at three sizes of the block and of the hemisphere, the time
 loop's wall time over its steps, and the least-squares slope in log-log (``slope.csv``). ``--slope-cg`` (alone): the
 same for ``memory_block`` to T = 0.3 at four sizes (4k to 78k dofs), with the sparse factor (``solver = "auto"``) and
