@@ -37,6 +37,89 @@ def test_factor_schur_complement_and_compliance_against_dense_algebra():
 
 
 @needs_mkl
+def test_a_factor_that_keeps_unknowns_last_gives_their_schur_complement_and_solves_in_parts():
+    """Factor(A, keep): the Schur complement from the same factorization; forward gives the condensed load there;
+    backward from any values there solves the other unknowns' equations; solve is A's solve."""
+    A = _spd()
+    n, dense = A.shape[0], A.toarray()
+    rng = np.random.default_rng(3)
+    keep = rng.choice(n, 25, replace=False)
+    F = pardiso.Factor(A, keep)
+    k = np.sort(keep)
+    o = np.setdiff1d(np.arange(n), k)
+    A_oo_inv_A_ok = np.linalg.solve(dense[np.ix_(o, o)], dense[np.ix_(o, k)])
+    S = dense[np.ix_(k, k)] - dense[np.ix_(k, o)] @ A_oo_inv_A_ok
+    assert np.array_equal(F.keep, k) and np.abs(F.schur - S).max() < 1e-10 * np.abs(S).max()
+    b = rng.standard_normal((n, 2))
+    assert np.abs(A @ F.solve(b) - b).max() < 1e-11 * np.abs(b).max()
+    assert np.abs(A @ F.solve(b[:, 0]) - b[:, 0]).max() < 1e-11 * np.abs(b).max()
+    y = F.forward(b[:, 0])
+    condensed = b[k, 0] - dense[np.ix_(k, o)] @ np.linalg.solve(dense[np.ix_(o, o)], b[o, 0])
+    assert np.abs(y[k] - condensed).max() < 1e-11 * np.abs(condensed).max()
+    x_k = rng.standard_normal(k.size)  # any values there (a contact problem's): the others follow
+    y[k] = x_k
+    x = F.backward(y)
+    assert np.abs(x[k] - x_k).max() < 1e-12 * np.abs(x_k).max()
+    assert np.abs((A @ x - b[:, 0])[o]).max() < 1e-11 * np.abs(b).max()
+
+
+@needs_mkl
+def test_pardiso_condenses_inside_its_own_factorization_when_asked_first_and_splits_a_solve():
+    """PardisoCholesky asked for the condensed stiffness before any solve keeps the contact dofs last: the stiffness
+    equals the separate Schur complement (the route once the factor exists, which then has no split), and the split
+    solve gives z at C and u from values at C."""
+    from workbench.schemes.contact_nodes import ContactNodes
+
+    d = discretisation.build(workbench.scene("memory_block", h=0.25))
+    discretisation.assemble(d)
+    C = ContactNodes(d).C[::-1].copy()  # (not in the dofs' order)
+    kept = solvers.factor(d.elastic.mat, d.fes.FreeDofs(), d.u.vec, "pardiso")
+    plain = solvers.factor(d.elastic.mat, d.fes.FreeDofs(), d.u.vec, "pardiso")
+    r = np.random.default_rng(4).standard_normal(d.ndof)
+    r[d.dirichlet_dofs] = 0.0
+    z = np.zeros(d.ndof)
+    plain.solve(r, z)  # (factored now: its condensed stiffness is the separate Schur complement)
+    S, reference = kept.condensed_stiffness(C), plain.condensed_stiffness(C)
+    assert plain.split(C) is None and kept.split(C[::-1]) is None
+    assert np.abs(S - reference).max() < 1e-10 * np.abs(reference).max()
+    split = kept.split(C)
+    z_C = split.free_displacement(r)
+    assert np.abs(z_C - z[C]).max() < 1e-10 * np.abs(z).max()
+    u_C = z_C + 0.1 * np.abs(z).max() * np.sin(np.arange(C.size))
+    u = np.zeros(d.ndof)
+    split.expand(u_C, u)
+    K = solvers.to_scipy(d.elastic.mat)
+    others = np.setdiff1d(kept.free, C)  # (their equations hold; at C the difference is the force holding u_C)
+    assert np.array_equal(u[C], u_C) and np.abs((K @ u - r)[others]).max() < 1e-9 * np.abs(r).max()
+    whole = np.zeros(d.ndof)
+    kept.solve(r, whole)  # (a whole solve through the kept factor)
+    assert np.abs(whole - z).max() < 1e-10 * np.abs(z).max()
+
+
+@needs_mkl
+@pytest.mark.parametrize("name, kw", [("memory_block", dict(h=0.2, solver="pardiso")),
+                                      ("block", dict(h=0.2, scheme="bdf2", T=0.1, solver="pardiso")),
+                                      ("memory_rod", dict(solver="pardiso")),
+                                      ("rod", dict(solver="pardiso", T=0.5, scheme="implicit"))])
+def test_runs_that_solve_in_parts_equal_runs_with_two_solves_a_step(monkeypatch, name, kw):
+    """Model B and Model A (bdf2), and the rods' moving clamp, condensed on PARDISO's factor: one solve in two parts
+    a step against z and u by two whole solves (the split switched off), and the back-substitutions counted."""
+    runs, expanded, expand = {}, [], solvers.SplitSolve.expand
+    monkeypatch.setattr(solvers.SplitSolve, "expand", lambda self, u_C, out: expanded.append(1) or expand(self, u_C, out))
+    for split in (True, False):
+        if not split:
+            monkeypatch.setattr(solvers.PardisoCholesky, "split", lambda self, C: None)
+        runs[split] = workbench.run(name, contact_solver="condensed", progress=False, **kw)
+    a, b = runs[True], runs[False]
+    assert len(expanded) >= a.sizes["time"] - 1  # (every step split; Model A's u(0) is given)
+    for v in ("u_contact", "contact_pressure", "u_probe"):
+        if v in b:
+            assert np.nanmax(np.abs(a[v] - b[v])) <= 1e-9 * max(float(np.nanmax(np.abs(b[v]))), 1e-300), v
+    if "linear_solves" in b:  # (Model B: one back-substitution fewer a step)
+        assert int(b.linear_solves.sum() - a.linear_solves.sum()) == a.sizes["time"]
+
+
+@needs_mkl
 def test_a_singular_matrix_is_refused_by_name():
     A = sp.diags([1.0, 0.0, 1.0]).tocsr()
     with pytest.raises(RuntimeError, match="PARDISO"):

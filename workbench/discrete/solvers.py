@@ -75,6 +75,10 @@ class Solver:
         the caller pays one back-substitution per point)."""
         return None
 
+    def split(self, C: np.ndarray):
+        """Solves in two parts around the dofs C (:class:`SplitSolve`), where the factor keeps C last; else None."""
+        return None
+
 
 def to_scipy(mat) -> sp.csr_matrix:
     """An NGSolve sparse matrix as SciPy CSR (the full matrix, also for symmetric storage)."""
@@ -91,16 +95,19 @@ class _HoldsMatrix:
     """Condensed stiffnesses from the SciPy matrix ``matrix`` on the ``free`` dofs, by MKL PARDISO's Schur
     complement, where MKL is available (:meth:`Solver.condensed_stiffness`)."""
 
+    def _free_positions(self, C: np.ndarray):
+        """The positions of the dofs C among the free dofs (the rows of ``matrix``); None if one of them is held."""
+        where = np.full(self.size, -1, dtype=np.int64)
+        where[self.free] = np.arange(self.free.size)
+        keep = where[C]
+        return None if np.any(keep < 0) else keep
+
     def condensed_stiffness(self, C: np.ndarray, B=None):
         if not pardiso.available():
             return None
-        where = np.full(self.size, -1, dtype=np.int64)
-        where[self.free] = np.arange(self.free.size)
         if B is None:
-            keep = where[C]
-            if np.any(keep < 0):  # (a contact dof held by a Dirichlet condition: no stiffness of its own)
-                return None
-            return pardiso.schur_complement(self.matrix, keep)
+            keep = self._free_positions(C)  # (None: a contact dof held by a Dirichlet condition has no stiffness)
+            return None if keep is None else pardiso.schur_complement(self.matrix, keep)
         S = pardiso.compliance(self.matrix, sp.csr_matrix(B)[:, self.free])
         return la.cho_solve(la.cho_factor(S), np.eye(S.shape[0])) if S.size else S
 
@@ -155,7 +162,14 @@ class PardisoCholesky(_HoldsMatrix, Solver):
     def __init__(self, K: sp.spmatrix, free: np.ndarray):
         self.size, self.free = K.shape[0], free
         self.matrix = K[free][:, free].tocsr()
-        self.factor = pardiso.Factor(self.matrix)
+        self._factor = None  # (factored at the first use: a condensed stiffness asked first is formed inside it)
+        self._kept = None
+
+    @property
+    def factor(self) -> pardiso.Factor:
+        if self._factor is None:
+            self._factor = pardiso.Factor(self.matrix)
+        return self._factor
 
     def solve(self, rhs: np.ndarray, out: np.ndarray) -> None:
         x = self.factor.solve(rhs[self.free])
@@ -166,6 +180,51 @@ class PardisoCholesky(_HoldsMatrix, Solver):
         X = np.zeros_like(R)
         X[self.free] = self.factor.solve(R[self.free])
         return X
+
+    def condensed_stiffness(self, C: np.ndarray, B=None):
+        """As :meth:`Solver.condensed_stiffness`; for dofs C asked before any solve, formed inside the factorization
+        itself, which keeps C last (:class:`pardiso.Factor` with ``keep``): one factorization instead of two."""
+        if B is None and self._factor is None:
+            keep = self._free_positions(C)
+            if keep is not None and 0 < keep.size < self.matrix.shape[0] and keep.size == np.unique(keep).size:
+                self._factor, self._kept = pardiso.Factor(self.matrix, keep), C.copy()
+                at = np.searchsorted(self._factor.keep, keep)
+                return self._factor.schur[np.ix_(at, at)]
+        return super().condensed_stiffness(C, B)
+
+    def split(self, C: np.ndarray):
+        """Solves in parts on the dofs C (:class:`SplitSolve`) where the factor keeps them last, else None."""
+        if self._kept is None or not np.array_equal(C, self._kept):
+            return None
+        return SplitSolve(self, C)
+
+
+class SplitSolve:
+    """A solve of K u = r in two parts around the dofs C that a :class:`PardisoCholesky` factor keeps last:
+    :meth:`free_displacement` at C, S_C^-1 y_C from the load C feels with the other dofs free, y_C = r_C -
+    K_CO K_OO^-1 r_O (S_C the condensed stiffness); then :meth:`expand` the values u_C found there (a contact problem
+    solved with S_C) to the whole u. One solve's work in all, where the contact step otherwise
+    pays two solves (the free displacement, then the contact forces' response)."""
+
+    def __init__(self, solver: PardisoCholesky, C: np.ndarray):
+        self.solver, self.C = solver, C
+        self.at = solver._free_positions(C)
+        self._sorted = np.searchsorted(solver.factor.keep, self.at)  # (the factor's kept dofs are sorted)
+        self._y = None
+
+    def free_displacement(self, rhs: np.ndarray) -> np.ndarray:
+        """u_C for the load ``rhs`` (a dof vector) with nothing acting at C, S_C^-1 y_C, in C's order."""
+        s = self.solver
+        self._y = s.factor.forward(rhs[s.free])
+        return s.factor.kept_solve(self._y[s.factor.keep])[self._sorted]
+
+    def expand(self, u_C: np.ndarray, out: np.ndarray) -> None:
+        """The solution on the free dofs, given its values ``u_C`` on C, for the last load (the held dofs of ``out``
+        are the caller's, left as they are)."""
+        s = self.solver
+        self._y[self.at] = u_C
+        out[s.free] = s.factor.backward(self._y)
+        out[self.C] = u_C  # (exactly: the contact problem's values, no round-off of the backward part)
 
 
 class NGSolveDirect(Solver):

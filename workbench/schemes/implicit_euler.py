@@ -129,11 +129,12 @@ class ImplicitEuler(ErrorControlled, KelvinVoigtScheme):
             M.AsVector().data = built_from * d.viscous.mat.AsVector() + d.elastic.mat.AsVector()
             solver = d.step_factor(M)
             newton = self.exchange.run(lambda: self._newton(solver), solver) if self.contact else None
-            self._factors[key] = (M, solver, newton, built_from)
+            split = solver.split(self.op.C) if self.op is not None and not self.coupled else None
+            self._factors[key] = (M, solver, newton, built_from, split)
             while len(self._factors) > self.cache_size:
                 self._factors.popitem(last=False)
         self._factors.move_to_end(key)
-        self.M, self.solver, self.newton, _ = self._factors[key]
+        self.M, self.solver, self.newton, _, self.split = self._factors[key]
         self.resolved = self.bonding is None or self.bonding.resolved(k, d.model.beta0)
 
     def _newton(self, solver):
@@ -180,7 +181,10 @@ class ImplicitEuler(ErrorControlled, KelvinVoigtScheme):
             lift[d.dirichlet_dofs] -= u[d.dirichlet_dofs]
             self.work.data = self.M * self.lift
             self.rhs_np -= self.work.FV().NumPy()
-        self.solver.solve(self.rhs_np, self.z)  # z = du without the contact forces
+        if self.split is not None:  # (one solve in two parts: z at the contact dofs now, the rest from du there)
+            self.z[self.op.C] = self.split.free_displacement(self.rhs_np)
+        else:
+            self.solver.solve(self.rhs_np, self.z)  # z = du without the contact forces
         if d.moves_clamp:
             self.z[d.dirichlet_dofs] = d.dirichlet_value(t_next) - u[d.dirichlet_dofs]
         self.iterations = self.passes = 0
@@ -227,6 +231,8 @@ class ImplicitEuler(ErrorControlled, KelvinVoigtScheme):
             if d.world.max(np.abs(beta[d.beta_dofs] - previous).max(initial=0.0)) <= self.beta_tol:
                 break
         self.iterations = x.share(self.newton.iterations if self.newton is not None else 0)
+        if self.split is not None:
+            return self.split.expand(u_C - self.u_prev[C], self.z)  # du from its values at the contact dofs
         out = np.zeros(d.ndof)
         self.solver.solve(x.spread(self._on_view(C, f_C)), out)
         self.z -= out

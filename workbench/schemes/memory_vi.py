@@ -41,6 +41,25 @@ one small dense solve, exact once the states are right, warm-started from the
 previous step's states), and one back-substitution to recover u. Recorded per
 step: iterations, state counts, the complementarity residual
 max |s - prox(s + rho lam / w)| and the number of linear solves.
+
+Where the factor keeps the contact vertices' normal dofs last (MKL PARDISO, condensed, P1, one process:
+:class:`workbench.discrete.solvers.SplitSolve`), the two back-substitutions of a step become one solve in two
+parts: the forward part gives the condensed load there, hence z at the contact dofs; the active set runs; the
+backward part gives u from the contact dofs' values. The condensed stiffness comes out of that same factorization.
+
+Local error (:meth:`MemoryVI.local_error`): u_n solves the inequality at t_n exactly for its memory term, so the
+step's local error is that of the memory integral over [t_{n-1}, t_n] (an embedded pair, not a predictor: u of a
+quasistatic problem kinks where a contact node changes state, and a predictor read that kink as an error that no
+step is short enough to remove - measured: memory_slab stopped at k = 5e-9 s). dM is, per kernel term C b(s), C
+applied to
+
+* rectangle: the trapezoid rule minus the rectangle rule, (k/2) (b(0) u_n - b(k) u_{n-1}) (Prony: the exact
+  integral of the linear interpolant minus k e^-x u_{n-1});
+* trapezoid: its own leading error -(k^3/12) g'', g(s) = b(t_n - s) u(s) by divided differences of u_n, u_{n-1},
+  u_{n-2} (Prony: the kernel is integrated exactly, only u's curvature counts: -(k^3/12) ((1 - e^-x)/x) u'').
+
+(:meth:`workbench.schemes.memory_rules.MemoryRule.error_terms`.) K^-1 (the factored operator of the step, contact
+left out) turns the force dM into a displacement.
 """
 from __future__ import annotations
 
@@ -136,12 +155,13 @@ class MemoryVI(ErrorControlled, Scheme):
                 # settle)
                 stiffness = schur.stiffness if schur is not None else np.diag(S_inv)
                 rho = 100.0 / stiffness if nodes.size else np.zeros(0)
-            self._operators[key] = [M, solver, S_inv, rho, schur]
+            split = solver.split(nodes.C) if S_inv is not None and x.solves and self.vertices_only else None
+            self._operators[key] = [M, solver, S_inv, rho, schur, split]
             while len(self._operators) > self.cache_size:
                 self._operators.popitem(last=False)
         else:
             self._operators.move_to_end(key)
-        self.M, self.solver, self.S_inv, self.rho, self.schur = self._operators[key]
+        self.M, self.solver, self.S_inv, self.rho, self.schur, self.split = self._operators[key]
         self._weights = weights
 
     def _condense(self, solver):
@@ -190,6 +210,8 @@ class MemoryVI(ErrorControlled, Scheme):
             d.lift(time, self.tmp.FV().NumPy())
             self.work.data = self.M * self.tmp
             self.rhs_np -= self.work.FV().NumPy()
+        if self.split is not None and self.size:
+            return self._split_equilibrium(u, time)
         self.solver.solve(self.rhs_np, self.z)
         if d.moves_clamp:
             self.z[d.dirichlet_dofs] = d.dirichlet_value(time)
@@ -206,6 +228,17 @@ class MemoryVI(ErrorControlled, Scheme):
         u_view = x.gather(u)
         if x.solves:
             self.diag = self._diagnostics(u_view, found[2] if self.size else None)
+
+    def _split_equilibrium(self, u: np.ndarray, time: float) -> None:
+        """:meth:`_equilibrium` by one solve in two parts around the contact dofs (module docs; serial, P1)."""
+        d, C = self.d, self.nodes.C
+        self.z[:] = 0.0
+        self.z[C] = self.split.free_displacement(self.rhs_np)  # (the contact problem reads z at C only)
+        _, fixed, (iterations, solves) = self._contact(self.z, time, u)
+        self.split.expand(fixed[C], u)  # (u on the Dirichlet dofs: 0, or the clamp's value set below)
+        if d.moves_clamp:
+            u[d.dirichlet_dofs] = d.dirichlet_value(time)
+        self.diag = self._diagnostics(u, (iterations, solves - 1))  # (-1: no second back-substitution)
 
     def _contact(self, z: np.ndarray, time: float, start: np.ndarray):
         """Where the contact problem is solved, from the contact-free displacement ``z`` and the step's start ``start``
@@ -249,24 +282,8 @@ class MemoryVI(ErrorControlled, Scheme):
 
     # -- error control, events, state -------------------------------------------------------------------------------
     def local_error(self, rtol, atol, order=None):
-        """The memory rule's error over the last step, through the step's operator: max |K^-1 dM| / (atol + rtol U).
-
-        u_n solves the inequality at t_n exactly for its memory term, so the step's local error is that of
-        the memory integral over [t_{n-1}, t_n] (an embedded pair, not a predictor: u of a quasistatic
-        problem kinks where a contact node changes state, and a predictor read that kink as an error that no
-        step is short enough to remove - measured: memory_slab stopped at k = 5e-9 s). dM is, per kernel
-        term C b(s), C applied to
-
-        * rectangle: the trapezoid rule minus the rectangle rule, (k/2) (b(0) u_n - b(k) u_{n-1}) (Prony:
-          the exact integral of the linear interpolant minus k e^-x u_{n-1});
-        * trapezoid: its own leading error -(k^3/12) g'', g(s) = b(t_n - s) u(s) by divided differences
-          of u_n, u_{n-1}, u_{n-2} (Prony: the kernel is integrated exactly, only u's curvature counts:
-          -(k^3/12) ((1 - e^-x)/x) u'').
-
-        (:meth:`workbench.schemes.memory_rules.MemoryRule.error_terms`.) K^-1 (the factored operator of the step,
-        contact left out) turns the force dM into a displacement. Without memory the scheme is exact in time: 0.
-        None while the history is too short.
-        """
+        """The memory rule's error over the last step, through the step's operator: max |K^-1 dM| / (atol + rtol U)
+        (module docs, "Local error"); 0 without memory (exact in time), None while the history is too short."""
         d = self.d
         if self.memory is None:
             return 0.0
