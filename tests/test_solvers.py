@@ -1,6 +1,7 @@
 """The banded Cholesky (RCM order) and MKL PARDISO's Cholesky solve the same systems as NGSolve's sparse Cholesky."""
 import numpy as np
 import pytest
+import xarray as xr
 
 import workbench
 from workbench.discrete import discretisation, pardiso, solvers
@@ -122,3 +123,13 @@ def test_auto_takes_cg_for_a_large_3d_explicit_run_only(monkeypatch):
     rods = [workbench.run("tp3", solver=s, T=0.5, progress=False) for s in ("cg", "banded")]
     assert rods[0].attrs["linear_solver"] == "cg"
     assert np.abs(rods[0].u_contact - rods[1].u_contact).max() < 1e-9 * np.abs(rods[1].u_contact).max()
+
+
+def test_model_a_implicit_archives_record_the_linear_solver_the_steps_took(tmp_path):
+    """Model A's implicit schemes factor at their first step; the archive still says which solver it was (default
+    arguments: the rod's band; asked for: PARDISO or NGSolve's factor on the block), also after netCDF."""
+    assert workbench.run("tp1", scheme="implicit", progress=False).attrs["linear_solver"] == "banded"
+    ds = workbench.run("block", scheme="bdf2", h=0.2, T=0.05, solver=SPARSE, progress=False)
+    ds.to_netcdf(tmp_path / "b.nc")
+    with xr.open_dataset(tmp_path / "b.nc") as back:
+        assert back.attrs["linear_solver"] == SPARSE

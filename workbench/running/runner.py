@@ -374,7 +374,7 @@ class _Run:
             "mpi_processes": self.world.size, "setup_time": self.setup_time, "wall_time": wall, "cpu_time": cpu,
             "status": status, "failure": "" if failure is None else str(failure),
             "failure_type": "" if failure is None else type(failure).__name__,
-        } | self.checks
+        } | self.checks | self.scheme.used()
         if self.record_times is not None:
             extra["record_times"] = [float(t) for t in self.record_times]  # (JSON text in the archive)
         out = results.provenance(self.sc, extra, self.call, self.model.terms)

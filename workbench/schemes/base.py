@@ -14,6 +14,9 @@ A time scheme is three small things, each a protocol with its defaults here:
     :class:`~workbench.errors.StepTooLarge`). Returns attributes to record
     (``k_crit``, ``bonding_resolved``, ...). Warnings it has to give come after all
     its checks (:meth:`Scheme.warnings`), so a refused run prints only its error.
+``used() -> dict``
+    Attributes known only once the run has stepped, recorded with preflight's when the archive is made (Model A's
+    implicit schemes factor their operator at the first step of each size: ``linear_solver``).
 ``start(t0)``
     The state at t0: Model A's u0 is given (nothing to do); Model B's quasistatic
     u(0) is the solution of the inequality at t0. Then ``accept(t0)``.
@@ -119,6 +122,10 @@ class Scheme:
     def warnings(self) -> list:
         """Messages (text) the run should warn about, issued by the loop after every preflight check passed."""
         return []
+
+    def used(self) -> dict:
+        """Attributes to record that the run's steps decided (module docs)."""
+        return {}
 
     def start(self, t0: float) -> None:
         return None

@@ -88,13 +88,17 @@ class ImplicitEuler(ErrorControlled, KelvinVoigtScheme):
         self.coupled = self.contact and d.numerics.coupled_contact(size, self.method, solvers.forms_schur(self.method))
         self.bonding = d.model.bonding
         self._factors = OrderedDict()
-        self.newton = None  # (the step's, from _prepare)
+        self.newton = self.solver = None  # (the step's, from _prepare)
         self.iterations = self.passes = 0
         self.resolved = True
 
     def preflight(self, k_max: float) -> dict:
         used = {"contact_solver_used": "coupled" if self.coupled else "condensed"} if self.d.side is not None else {}
         return self.bonding_check(k_max) | used
+
+    def used(self) -> dict:
+        """The linear solver of the step's operators (chosen when the first is factored; the same for every a0)."""
+        return {"linear_solver": self.solver.name} if self.solver is not None else {}
 
     # -- the multistep formula -------------------------------------------------------------------------------
     def coefficients(self, k: float):
