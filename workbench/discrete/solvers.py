@@ -329,8 +329,8 @@ def rcm(K: sp.spmatrix, free: np.ndarray):
 BAND_BYTES = 1.0e9
 
 
-#: The estimated sparse factor above which ``auto`` takes ``cg`` for the explicit scheme in 3D (the P2 block at 271k
-#: dofs: a 4.3 GB factor, 130 s to factor, measured).
+#: The estimated sparse factor above which ``auto`` takes ``cg`` in 3D (the P2 block at 271k dofs: NGSolve's factor
+#: 4.3 GB, 130 s to factor; PARDISO's 2.05 GB; measured): about 150k dofs with NGSolve's factor, 240k with PARDISO's.
 FACTOR_BYTES = 2.0e9
 #: Relative residual ||b - K x|| / ||b|| at which ``cg`` stops.
 CG_TOL = 1e-10
@@ -338,23 +338,35 @@ CG_TOL = 1e-10
 CG_MAXITER = 500
 
 
-def sparse_factor_bytes(dim: int, ndof: int) -> float:
-    """The memory of NGSolve's sparse Cholesky factor, order of magnitude (measured: the P2 block, 271k dofs, 4.3 GB;
-    in 2D nested-dissection-like fill)."""
+#: Bytes of a 3D sparse Cholesky factor over n^(4/3), by the factor: NGSolve's ``sparsecholesky`` (the P2 block at 271k
+#: dofs: 4.3 GB) and MKL PARDISO's, METIS-ordered, whose analysis counts the factor's nonzeros: 8 x 11.0-16.5 n^(4/3)
+#: bytes on the P1 block (28k, 78k, 267k dofs: 0.09, 0.40, 2.27 GB), the P2 block (5.5k, 37k, 271k: 0.008, 0.12,
+#: 2.05 GB) and the hemisphere (47k: 0.15 GB), the largest taken.
+FILL_3D = {"sparsecholesky": 8.0 * 31.0, "pardiso": 8.0 * 16.5}
+
+
+def sparse_factor_bytes(dim: int, ndof: int, method: str = "sparsecholesky") -> float:
+    """The memory of the sparse Cholesky factor ``method`` resolves to (``auto`` and ``pardiso``: PARDISO's where MKL
+    loads, else NGSolve's), order of magnitude (:data:`FILL_3D`; in 2D nested-dissection-like fill).
+
+    >>> round(sparse_factor_bytes(3, 271_000, "sparsecholesky") / 1e9, 1)  # (measured: 4.3 GB on the P2 block)
+    4.3
+    """
     if dim == 3:
-        return 8.0 * 31.0 * ndof ** (4.0 / 3.0)
+        kind = "pardiso" if method in ("auto", "pardiso") and pardiso.available() else "sparsecholesky"
+        return FILL_3D[kind] * ndof ** (4.0 / 3.0)
     return 8.0 * 30.0 * ndof * max(1.0, np.log2(max(ndof, 2)))
 
 
 def choose(method: str, dim: int, ndof: int, iterative: bool) -> str:
-    """The method ``auto`` resolves to before anything is assembled: ``cg`` for a 3D body whose factor would exceed
-    :data:`FACTOR_BYTES` when the caller can take an iterative solver (``iterative``), else ``auto`` (banded or
-    sparse, decided on the matrix by :func:`factor`).
+    """The method ``auto`` resolves to before anything is assembled: ``cg`` for a 3D body whose factor (the one ``auto``
+    takes: PARDISO's where MKL loads) would exceed :data:`FACTOR_BYTES` when the caller can take an iterative solver
+    (``iterative``), else ``auto`` (banded or sparse, decided on the matrix by :func:`factor`).
 
     >>> choose("auto", 3, 300_000, True), choose("auto", 3, 300_000, False), choose("auto", 2, 10**6, True)
     ('cg', 'auto', 'auto')
     """
-    if method == "auto" and iterative and dim == 3 and sparse_factor_bytes(dim, ndof) > FACTOR_BYTES:
+    if method == "auto" and iterative and dim == 3 and sparse_factor_bytes(dim, ndof, method) > FACTOR_BYTES:
         return "cg"
     return method
 

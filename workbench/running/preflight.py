@@ -59,7 +59,7 @@ def estimate(geometry, order: int, solver: str = "auto", iterative: bool = False
         dissection = 8.0 * 30.0 * ndof * max(1.0, math.log2(ndof))
         factor = min(banded, dissection)
     else:
-        factor = sparse_factor_bytes(dim, ndof)  # measured: P2 block, 271k dofs, sparsecholesky 4.3 GB
+        factor = sparse_factor_bytes(dim, ndof, solver)  # (the factor auto or the given solver takes)
     matrices = 8.0 * 3 * ndof * (9 * order ** dim) * dim  # K_A, K_G (and M): about 9 p^d dim entries per row
     if choose(solver, dim, ndof, iterative) == "cg":
         factor = 1.5 * matrices  # SciPy's copy of K_A, the AMG levels, CG's vectors (a run at 271k dofs: 2.1 GB peak)
