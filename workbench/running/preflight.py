@@ -46,7 +46,7 @@ def estimate(geometry, order: int, solver: str = "auto", iterative: bool = False
     """Displacement dofs and bytes to assemble and factor the constant matrix (order of magnitude); with ``solver =
     "cg"``, or ``"auto"`` where it resolves to cg (``iterative``: the explicit scheme, :func:`workbench.discrete.solvers.choose`),
     the matrix copy and the AMG hierarchy of the iterative solver instead of a factor."""
-    from ..discrete.solvers import choose, sparse_factor_bytes
+    from ..discrete.solvers import PARDISO_WORK, choose, factor_kind, sparse_factor_bytes
 
     dim = geometry.dim
     vertices = geometry.vertex_count()
@@ -59,7 +59,8 @@ def estimate(geometry, order: int, solver: str = "auto", iterative: bool = False
         dissection = 8.0 * 30.0 * ndof * max(1.0, math.log2(ndof))
         factor = min(banded, dissection)
     else:
-        factor = sparse_factor_bytes(dim, ndof, solver)  # (the factor auto or the given solver takes)
+        factor = sparse_factor_bytes(dim, ndof, solver)  # (the factor auto or the given solver takes, with its work)
+        factor *= PARDISO_WORK if factor_kind(solver) == "pardiso" else 1.0
     matrices = 8.0 * 3 * ndof * (9 * order ** dim) * dim  # K_A, K_G (and M): about 9 p^d dim entries per row
     if choose(solver, dim, ndof, iterative) == "cg":
         factor = 1.5 * matrices  # SciPy's copy of K_A, the AMG levels, CG's vectors (a run at 271k dofs: 2.1 GB peak)
