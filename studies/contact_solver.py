@@ -1,7 +1,8 @@
 """The contact solvers side by side: condensed (dense contact stiffness) against coupled (whole body, S never
 formed), on the same meshes, in one process, one thread each.
 
-    python studies/contact_solver.py [--out data/contact_solver] [--big] [--slope] [--slope-cg] [--pdas-amg] [--pardiso]
+    python studies/contact_solver.py [--out data/contact_solver] [--big] [--slope] [--slope-cg] [--slope-auto] [--repeat N] [--pdas-amg]
+        [--pardiso]
 
 Per case and solver: dofs, contact points, steps, wall time of ``workbench.run`` (the mesh made once beforehand, so
 both pay the same), the setup time, back-substitutions (``linear_solves``), active-set and conjugate gradient
@@ -14,7 +15,9 @@ the cost of a step of the coupled solver against the dofs at three sizes of the 
 loop's wall time over its steps, and the least-squares slope in log-log (``slope.csv``). ``--slope-cg`` (alone): the
 same for ``memory_block`` to T = 0.3 at four sizes (4k to 78k dofs), with the sparse factor (``solver = "auto"``) and
 with AMG-preconditioned conjugate gradients (``solver = "cg"``), side by side (``slope_cg.csv``; about 12 minutes).
-``--slope-auto`` (alone): the same four sizes with the contact solver ``auto`` takes (``slope_auto.csv``).
+``--slope-auto`` (alone): the same four sizes with the contact solver ``auto`` takes (``slope_auto.csv``). ``--repeat N``:
+each size of a slope N times, the median loop kept (the loops are tenths of a second at the small sizes: one run is
+noise).
 ``--pardiso`` (alone; with ``--big`` also the 47k hemisphere): both contact solvers on NGSolve's factor and on MKL
 PARDISO's, beside the yardsticks: one factorization with each, a back-substitution with each, and PARDISO's Schur
 complement on the contact points (``pardiso.csv``). ``--pdas-amg`` (alone): a route measured and not taken, the active set on the whole body with AMG-CG solves
@@ -88,14 +91,18 @@ SLOPE_AUTO = [("memory_block, contact_solver = auto", "memory_block",
                [dict(h=h, T=0.3) for h in (0.1, 0.07, 0.05, 0.035)])]
 
 
-def slope(rows, cases=None, contact="coupled", sticks=False) -> None:
+def slope(rows, cases=None, contact="coupled", sticks=False, repeat=1) -> None:
     """The time loop's cost per step (the ``contact`` solver, one thread) against the dofs, and its log-log slope (over
     all sizes, and ``slope_last`` over the last two); ``whole_per_step``: the whole run's wall time over its steps;
-    with ``sticks`` the yardsticks of each size beside (:func:`yardsticks`: a factorization and a solve)."""
+    with ``sticks`` the yardsticks of each size beside (:func:`yardsticks`: a factorization and a solve). Each size
+    runs ``repeat`` times, the run of the median loop time kept (``repeats``: the loop times of all)."""
     for label, name, sizes in cases or [(name, name, sizes) for name, sizes in SLOPE]:
         mine = []
         for overrides in sizes:
-            row, ds = one(name, overrides, contact)
+            runs = sorted((one(name, overrides, contact) for _ in range(repeat)),
+                          key=lambda run: float(run[1].attrs["wall_time"]))
+            row, ds = runs[len(runs) // 2]
+            row["repeats"] = " ".join(f"{float(d.attrs['wall_time']):.3f}" for _, d in runs)
             if sticks:
                 row.update(yardsticks(name, {k: v for k, v in overrides.items() if k != "solver"}))
             row.update(loop=round(float(ds.attrs["wall_time"]), 3),
@@ -263,6 +270,7 @@ def main():
     p.add_argument("--slope", action="store_true", help="only the cost of a step against the dofs (slope.csv)")
     p.add_argument("--slope-cg", action="store_true", help="the same, factor against CG (slope_cg.csv)")
     p.add_argument("--slope-auto", action="store_true", help="the same, the contact solver auto takes (slope_auto.csv)")
+    p.add_argument("--repeat", type=int, default=1, help="with --slope*: runs of each size, the median kept")
     p.add_argument("--pdas-amg", action="store_true", help="only the active set on the whole body with AMG-CG, one "
                    "load step of the hemisphere (pdas_amg.csv)")
     p.add_argument("--pardiso", action="store_true", help="only both contact solvers on NGSolve's factor and on "
@@ -293,9 +301,9 @@ def main():
         with threadpool_limits(1):
             workbench.run("memory_slab", h=0.5, k=0.5, progress=False)  # (warm-up)
             if args.slope_auto:
-                slope(rows, SLOPE_AUTO, "auto", sticks=True)
+                slope(rows, SLOPE_AUTO, "auto", sticks=True, repeat=args.repeat)
             else:
-                slope(rows, SLOPE_CG if args.slope_cg else None)
+                slope(rows, SLOPE_CG if args.slope_cg else None, repeat=args.repeat)
         name = "slope_auto.csv" if args.slope_auto else "slope_cg.csv" if args.slope_cg else "slope.csv"
         with open(out / name, "w", newline="") as f:
             w = csv.DictWriter(f, fieldnames=list(rows[-1]))
