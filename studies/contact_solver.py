@@ -1,8 +1,8 @@
 """The contact solvers side by side: condensed (dense contact stiffness) against coupled (whole body, S never
 formed), on the same meshes, in one process, one thread each.
 
-    python studies/contact_solver.py [--out data/contact_solver] [--big] [--slope] [--slope-cg] [--slope-auto] [--repeat N] [--pdas-amg]
-        [--pardiso]
+    python studies/contact_solver.py [--out data/contact_solver] [--big] [--slope] [--slope-cg] [--slope-auto]
+        [--repeat N] [--pdas-amg] [--pardiso]
 
 Per case and solver: dofs, contact points, steps, wall time of ``workbench.run`` (the mesh made once beforehand, so
 both pay the same), the setup time, back-substitutions (``linear_solves``), active-set and conjugate gradient
@@ -15,9 +15,9 @@ the cost of a step of the coupled solver against the dofs at three sizes of the 
 loop's wall time over its steps, and the least-squares slope in log-log (``slope.csv``). ``--slope-cg`` (alone): the
 same for ``memory_block`` to T = 0.3 at four sizes (4k to 78k dofs), with the sparse factor (``solver = "auto"``) and
 with AMG-preconditioned conjugate gradients (``solver = "cg"``), side by side (``slope_cg.csv``; about 12 minutes).
-``--slope-auto`` (alone): the same four sizes with the contact solver ``auto`` takes (``slope_auto.csv``). ``--repeat N``:
-each size of a slope N times, the median loop kept (the loops are tenths of a second at the small sizes: one run is
-noise).
+``--slope-auto`` (alone): the same four sizes with the contact solver ``auto`` takes (``slope_auto.csv``).
+``--repeat N``: each size of a slope N times, the median loop kept (the loops are tenths of a second at the small
+sizes: one run is noise).
 ``--pardiso`` (alone; with ``--big`` also the 47k hemisphere): both contact solvers on NGSolve's factor and on MKL
 PARDISO's, beside the yardsticks: one factorization with each, a back-substitution with each, and PARDISO's Schur
 complement on the contact points (``pardiso.csv``). ``--pdas-amg`` (alone): a route measured and not taken, the active set on the whole body with AMG-CG solves
@@ -276,6 +276,8 @@ def main():
     p.add_argument("--pardiso", action="store_true", help="only both contact solvers on NGSolve's factor and on "
                    "MKL PARDISO, with --big the hemisphere at 47k dofs too (pardiso.csv)")
     args = p.parse_args()
+    if args.repeat < 1:
+        p.error(f"--repeat: at least 1 run of each size, got {args.repeat}")
     out = Path(args.out)
     out.mkdir(parents=True, exist_ok=True)
     rows = []

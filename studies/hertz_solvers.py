@@ -6,8 +6,8 @@ Each run is a process of its own, one thread, so that its peak memory (the proce
 whole time (imports and meshing included) are its own. Per run: dofs, contact vertices, the contact and linear
 solvers taken, active-set iterations, back-substitutions (``setup_backsubs``: those that form the contact stiffness,
 one per contact vertex on NGSolve's factor), conjugate gradient iterations, the run's wall time (``workbench.run``,
-after the imports, which ``imports`` times apart), the process's wall time and peak memory, and against Hertz (the Signorini limit, Model B):
-the pressure's L2 error (lumped and recovered), the peak's error (the apex left out: it is held, and its value is a
+after the imports, which ``imports`` times apart), the process's wall time and peak memory, and against Hertz (the
+Signorini limit, Model B): the pressure's L2 error (lumped and recovered), the peak's error (the apex left out: it is held, and its value is a
 reaction) and the contact radius (the farthest vertex in contact and the nearest out of it, over a).
 
 ``now``: the defaults (``contact_solver = solver = "auto"``). ``before``: the solver when issue 22 was filed,
@@ -99,7 +99,8 @@ def table(rows) -> str:
         out.append(f"| `{r['case']}` | {r['h_contact']} | {r['ndof']} | {r['contact_vertices']} | {solver} | "
                    f"{r['active_set_iterations']} | {r['setup_backsubs']} + {r['backsubs']} ({r['cg_iterations']}) | "
                    f"{r['run_wall']} s | "
-                   f"{r['process_wall']} s | {r['peak_mb']} MB | {100 * r['l2']:.2f} / {100 * r['l2_recovered']:.2f} % | "
+                   f"{r['process_wall']} s | {r['peak_mb']} MB | "
+                   f"{100 * r['l2']:.2f} / {100 * r['l2_recovered']:.2f} % | "
                    f"{100 * r['peak_recovered']:+.2f} % | {100 * r['a_last']:+.1f} / {100 * r['a_next']:+.1f} % |")
     return "\n".join(out)
 

@@ -182,7 +182,8 @@ def test_import_workbench_does_not_load_mkl():
 
 @needs_mkl
 @pytest.mark.parametrize("name, kw", [("memory_block", dict(h=0.05)), ("block", dict(h=0.05)),
-                                      ("memory_hertz3d", dict(h_contact=0.01))], ids=["P1 block", "P2 block", "hemisphere"])
+                                      ("memory_hertz3d", dict(h_contact=0.01))],
+                         ids=["P1 block", "P2 block", "hemisphere"])
 def test_the_factor_estimate_auto_decides_by_bounds_pardisos_own_count(name, kw):
     """The memory ``auto`` weighs before it factors (``cg`` beyond FACTOR_BYTES) is that of the factor it would take:
     PARDISO's, whose analysis counts its nonzeros. The estimate must bound the count without overstating it more than
