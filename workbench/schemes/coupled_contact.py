@@ -123,15 +123,19 @@ class CoupledActiveSet:
         if U.size == 0:
             return x, S_x
         r = b[U] - S_x[U] - D[U] * x[U]
-        # loose: relative to the first residual (the states' correction); tight: to the displacements' scale
-        scale = max(np.abs(b[U]).max(), 1e-300) if tol == self.tight else max(np.abs(r).max(), 1e-300)
+        # tight: relative to the displacements' scale; loose: to the first residual (the states' correction), but
+        # never below the tight target: a start that already solves the system (a load held since t = 0, no memory)
+        # leaves a residual of round-off, which no number of iterations divides by 100
+        target = self.tight * max(np.abs(b[U]).max(), 1e-300)
+        if tol != self.tight:
+            target = max(tol * np.abs(r).max(), target)
         V, AV, SV = self.memory.basis(schur, unknown, D)
         if V.shape[1]:  # the remembered directions' part of the solution, exactly (V^T A V = I)
             mu = V.T @ r
             x[U] += V @ mu
             S_x += SV @ mu
             r -= AV @ mu
-        return self._conjugate_gradients(schur, (U, b[U], D[U]), x, S_x, r, (V, AV), tol * scale, time)
+        return self._conjugate_gradients(schur, (U, b[U], D[U]), x, S_x, r, (V, AV), target, time)
 
     def _conjugate_gradients(self, schur, system, x, S_x, r, deflation, tol, time):
         """Preconditioned CG on the points U of ``system`` = (U, b_U, D_U), deflated by (V, A V), from x (S x and the
