@@ -138,6 +138,45 @@ def test_the_explicit_scheme_refuses_coupled_with_the_allowed_values():
     assert "contact_solver" in str(err.value) and "coupled" in str(err.value)
 
 
+def test_the_half_space_compliance_gives_boussinesqs_loaded_circle():
+    """The half-space preconditioner's kernel against an exact solution (Johnson, Contact Mechanics, 3.2): a uniform
+    pressure p on a circle of radius A lowers the surface by 2 p A (1 - nu^2) / E at its centre and by 4 p A / pi
+    (1 - nu^2) / E at its rim. The circle sampled by a square grid of points (spacing 1/20 of A), each carrying its
+    share of the force; the kernel is in units of (1 - nu^2) / E. At the centre the point's own term matters: half
+    of it misses by 1.4 % (measured: -0.02 % with it, the rim -0.34 %)."""
+    from workbench.schemes.coupled_contact import HalfSpace
+
+    A, h, p = 1.0, 1.0 / 20, 3.0
+    g = np.arange(-A - h / 2, A + h, h)
+    X, Y = np.meshgrid(g, g)
+    inside = X ** 2 + Y ** 2 <= A ** 2
+    x = np.column_stack([X[inside], Y[inside], np.zeros(inside.sum())])
+    rim = np.array([[A, 0.0, 0.0]])  # (off the grid: a probe only, its force 0)
+    points = np.vstack([x, rim])
+    w = np.concatenate([np.full(len(x), h * h), [h * h]])
+    G = HalfSpace(points, w).compliance(np.arange(len(points)))
+    force = np.concatenate([np.full(len(x), p * h * h), [0.0]])
+    deflection = G @ force
+    centre = int(np.argmin(np.linalg.norm(x, axis=1)))
+    assert deflection[centre] == pytest.approx(2 * p * A, rel=0.003)
+    assert deflection[-1] == pytest.approx(4 * p * A / np.pi, rel=0.01)
+    assert np.linalg.eigvalsh(G).min() > 0  # (positive definite: it is factored)
+
+
+def test_the_half_space_preconditioner_cuts_the_back_substitutions(monkeypatch):
+    """The hemisphere at h_contact = 0.01 from rest to the full load: with the half-space preconditioner the same
+    pressures (to the solver's tolerance) for far fewer back-substitutions (measured: 132 against 203, the conjugate
+    gradient iterations 100 against 169)."""
+    from workbench.schemes.coupled_contact import HalfSpace
+
+    with_it = workbench.run("memory_hertz3d", h_contact=0.01, contact_solver="coupled", progress=False)
+    monkeypatch.setattr(HalfSpace, "largest", 0)
+    without = workbench.run("memory_hertz3d", h_contact=0.01, contact_solver="coupled", progress=False)
+    p, q = with_it.contact_pressure, without.contact_pressure
+    assert float(np.nanmax(np.abs(p - q))) <= 1e-7 * float(np.nanmax(np.abs(q)))
+    assert int(with_it.linear_solves.sum()) < 0.75 * int(without.linear_solves.sum())
+
+
 def test_remembered_directions_cut_the_iterations(monkeypatch):
     """The Krylov memory (deflated CG): on the block's 40 steps, far fewer iterations than without it (measured:
     369 against 1398 at h = 0.1), to the same solution."""

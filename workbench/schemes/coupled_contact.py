@@ -36,6 +36,7 @@ Examples
 from __future__ import annotations
 
 import numpy as np
+import scipy.linalg as la
 
 from ..errors import NewtonFailed
 from ..physics.unilateral import COMPLIANT, RIGID, SEPARATED, STUCK
@@ -57,6 +58,8 @@ class CoupledActiveSet:
         self.nodes = nodes
         self.linear_iterations = 0
         self.memory = KrylovMemory()
+        x = nodes.positions()
+        self.halfspace = HalfSpace(x, nodes.w) if x.shape[1] == 3 and nodes.B is None else None
 
     def solve(self, schur, rho, s_free: np.ndarray, time: float, fallback, u=None):
         """(s, lam, iterations) as :meth:`ContactNodes.solve` (``u`` as there); ``fallback()`` returns the condensed
@@ -145,10 +148,14 @@ class CoupledActiveSet:
         U, b, D = system
         V, AV = deflation
         w = x.size
-        precondition = 1.0 / (1.0 / schur.stiffness[U] + D)
+        if np.abs(r).max() <= tol and np.abs(b - S_x[U] - D * x[U]).max() <= tol:
+            return x, S_x  # (solved already: no preconditioner to build)
+        diagonal = 1.0 / (1.0 / schur.stiffness[U] + D)
+        precondition = (self.halfspace.preconditioner(U, D, diagonal) if self.halfspace is not None else None) or \
+            (lambda r: diagonal * r)
         limit = max(200, 2 * U.size)
         for _ in range(2):
-            z = precondition * r
+            z = precondition(r)
             p, rz = z - V @ (AV.T @ z), float(r @ z)
             best = np.abs(r).max()
             for _ in range(limit):
@@ -171,7 +178,7 @@ class CoupledActiveSet:
                 x[U] += a * p
                 S_x += a * S_p
                 r -= a * q
-                z = precondition * r
+                z = precondition(r)
                 rz, rz_old = float(r @ z), rz
                 p = z + (rz / rz_old) * p - V @ (AV.T @ z)  # (deflated: A-orthogonal to the remembered directions)
             if not V.shape[1]:
@@ -183,6 +190,65 @@ class CoupledActiveSet:
         raise NewtonFailed(f"the coupled contact solve (conjugate gradients on {U.size} contact points) did not reach "
                            f"its tolerance in {limit} iterations at t = {time:.6g} s (residual {residual:.2g} x the tolerance); try "
                            "contact_solver = 'condensed'", time=time)
+
+
+class HalfSpace:
+    """A preconditioner for the systems S_UU + diag(D) on 3D contact points: the compliance of an elastic half-space
+    between them (Boussinesq: a normal point force F at distance r lowers the surface by F (1 - nu^2) / (pi E r); a
+    point's own, its share w of the surface loaded evenly as a disc, 2 (1 - nu^2) / (pi E a) with pi a^2 = w), scaled
+    so that its diagonal matches S's estimate 1 / K_ii at the median, and factored densely for each set U.
+
+    S = B K^-1 B^T is the body's compliance at the contact points; near a contact zone small against the body (Hertz's
+    own assumption) the half-space's is a close approximation of all of it, the part a diagonal preconditioner misses
+    being the long-range coupling that makes S dense. Measured on the Hertz hemisphere from rest to the full load in
+    4 steps: 251 -> 162 back-substitutions at 47k dofs (208 -> 117 conjugate gradient iterations), 203 -> 132 at 12k.
+    Its cost is that of the dense factor, m^3 / 3 for m points (0.09 s at 2000 points, one thread, about 3
+    back-substitutions at 47k dofs, plus as much again to form it): past :attr:`largest` points the diagonal is kept.
+
+    >>> x = np.array([[0.0, 0.0, 0.0], [1.0, 0.0, 0.0]])
+    >>> G = HalfSpace(x, np.full(2, np.pi)).compliance(np.arange(2))  # discs of radius 1, 1 apart
+    >>> (G * np.pi).round(6).tolist()  # own: 2 / a; the other's: 1 / r
+    [[2.0, 1.0], [1.0, 2.0]]
+    """
+
+    #: The most points factored (beyond, the diagonal preconditioner).
+    largest = 2000
+
+    def __init__(self, positions: np.ndarray, w: np.ndarray):
+        self.x, self.w = np.asarray(positions, dtype=float), np.asarray(w, dtype=float)
+        self._key, self._factor = None, None
+
+    def compliance(self, U: np.ndarray) -> np.ndarray:
+        """The half-space's compliance between the points U (in units of (1 - nu^2) / E), dense."""
+        x = self.x[U]
+        sq = np.einsum("ij,ij->i", x, x)
+        G = x @ x.T  # (|x_i - x_j|^2 from the Gram matrix: no m x m x 3 temporary)
+        G *= -2.0
+        G += sq[:, None]
+        G += sq[None, :]
+        np.maximum(G, 0.0, out=G)
+        np.sqrt(G, out=G)
+        np.fill_diagonal(G, 1.0)
+        np.divide(1.0 / np.pi, G, out=G)
+        np.fill_diagonal(G, 2.0 / (np.pi * np.sqrt(self.w[U] / np.pi)))
+        return G
+
+    def preconditioner(self, U: np.ndarray, D: np.ndarray, diagonal: np.ndarray):
+        """r -> (c G_UU + diag(D))^-1 r, c matching c G_ii to 1 / ``diagonal`` - D at the median; None for fewer than
+        2 or more than :attr:`largest` points (or should the factor fail). The last factor is kept for the same U, D."""
+        if not 2 <= U.size <= self.largest:
+            return None
+        key = (U.tobytes(), D.tobytes())
+        if key != self._key:
+            G = self.compliance(U)
+            G *= np.median((1.0 / diagonal - D) / np.diag(G))
+            G[np.diag_indices_from(G)] += D
+            try:
+                self._key, self._factor = key, la.cho_factor(G, check_finite=False)
+            except la.LinAlgError:
+                self._key, self._factor = key, None
+        factor = self._factor
+        return None if factor is None else (lambda r: la.cho_solve(factor, r, check_finite=False))
 
 
 class KrylovMemory:
