@@ -38,6 +38,7 @@ from __future__ import annotations
 import numpy as np
 import scipy.linalg as la
 
+from ..discrete import solvers
 from ..errors import NewtonFailed
 from ..physics.unilateral import COMPLIANT, RIGID, SEPARATED, STUCK
 
@@ -54,12 +55,15 @@ class CoupledActiveSet:
     #: not of the problem: measured on the hemisphere at h_contact = 0.01, one node flipping at rho, none at rho / 100).
     rho_scales = (1.0, 0.01, 100.0)
 
-    def __init__(self, nodes):
+    def __init__(self, nodes, method: str = "auto", ndof: int | None = None):
         self.nodes = nodes
         self.linear_iterations = 0
         self.memory = KrylovMemory()
         x = nodes.positions()
-        self.halfspace = HalfSpace(x, nodes.w) if x.shape[1] == 3 and nodes.B is None else None
+        self.halfspace = None
+        if x.shape[1] == 3 and nodes.B is None:  # (3D contact vertices; the ``method`` and ``ndof`` of K: its cost)
+            largest = HalfSpace.largest_for(nodes.d.ndof if ndof is None else ndof, method)
+            self.halfspace = HalfSpace(x, nodes.w, largest)
 
     def solve(self, schur, rho, s_free: np.ndarray, time: float, fallback, u=None):
         """(s, lam, iterations) as :meth:`ContactNodes.solve` (``u`` as there); ``fallback()`` returns the condensed
@@ -203,7 +207,8 @@ class HalfSpace:
     being the long-range coupling that makes S dense. Measured on the Hertz hemisphere from rest to the full load in
     4 steps: 251 -> 162 back-substitutions at 47k dofs (208 -> 117 conjugate gradient iterations), 203 -> 132 at 12k.
     Its cost is that of the dense factor, m^3 / 3 for m points (0.09 s at 2000 points, one thread, about 3
-    back-substitutions at 47k dofs, plus as much again to form it): past :attr:`largest` points the diagonal is kept.
+    back-substitutions at 47k dofs, plus as much again to form it): past ``largest`` points (:meth:`largest_for`)
+    the diagonal is kept.
 
     >>> x = np.array([[0.0, 0.0, 0.0], [1.0, 0.0, 0.0]])
     >>> G = HalfSpace(x, np.full(2, np.pi)).compliance(np.arange(2))  # discs of radius 1, 1 apart
@@ -211,12 +216,26 @@ class HalfSpace:
     [[2.0, 1.0], [1.0, 2.0]]
     """
 
-    #: The most points factored (beyond, the diagonal preconditioner).
-    largest = 2000
+    #: The fewest and the most points :meth:`largest_for` lets a set of unknown points have and be factored.
+    bounds = (2000, 5000)
 
-    def __init__(self, positions: np.ndarray, w: np.ndarray):
-        self.x, self.w = np.asarray(positions, dtype=float), np.asarray(w, dtype=float)
+    def __init__(self, positions: np.ndarray, w: np.ndarray, largest: int = 2000):
+        self.x, self.w, self.largest = np.asarray(positions, dtype=float), np.asarray(w, dtype=float), largest
         self._key, self._factor = None, None
+
+    @classmethod
+    def largest_for(cls, ndof: int, method: str) -> int:
+        """The most points worth a dense factor beside K's (``method``: the step's solver, ``ndof`` its dofs): m^3 / 3
+        flops (about 30 GFlop/s on one core) against two back-substitutions through the sparse factor's nonzeros nnz
+        (:func:`~workbench.discrete.solvers.sparse_factor_bytes`; 16 bytes each, read at about 10 GB/s), so
+        m^3 = 288 nnz, within :attr:`bounds`. Measured on the hemisphere at 193k dofs (4700 points in contact at the
+        end): 3760 points, 274 back-substitutions and 78.6 s, against 355 and 79.6 s with 2000.
+
+        >>> [HalfSpace.largest_for(n, "sparsecholesky") for n in (12_000, 46_938, 193_464, 500_000)]
+        [2000, 2473, 4640, 5000]
+        """
+        nnz = solvers.sparse_factor_bytes(3, ndof, method) / 8.0
+        return int(np.clip(round((288.0 * nnz) ** (1.0 / 3.0)), *cls.bounds))
 
     def compliance(self, U: np.ndarray) -> np.ndarray:
         """The half-space's compliance between the points U (in units of (1 - nu^2) / E), dense."""

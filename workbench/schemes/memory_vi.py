@@ -106,7 +106,7 @@ class MemoryVI(ErrorControlled, Scheme):
         self.method = d.step_solver()
         self.coupled = None
         if d.numerics.coupled_contact(self.size, self.method, solvers.forms_schur(self.method)):
-            self.coupled = CoupledActiveSet(self.nodes) if x.solves else True
+            self.coupled = CoupledActiveSet(self.nodes, self.method, d.ndof) if x.solves else True
         self.memory = rule_for(d, self.trapezoid)  # (None without memory)
         self._balance = None  # f - memory of the last equilibrium (only for the reaction of pinned contact nodes)
         self._operators = OrderedDict()
