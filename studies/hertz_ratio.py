@@ -1,0 +1,95 @@
+"""The 3D Hertz run against one factorization of its own stiffness, at three sizes: how issue 22's ratio moves with n.
+
+    python studies/hertz_ratio.py [--out data/hertz] [--levels 0.005 0.0035 0.0025] [--compare]
+
+Issue 22 measures the whole Signorini Hertz run of ``memory_hertz3d`` (defaults: ``contact_solver = solver =
+"auto"``, from rest to the full load in 4 steps) against one sparse Cholesky factorization of a P1 elasticity matrix
+of the same size (NGSolve's ``sparsecholesky``, one thread). Each level is a process of its own, one thread: it
+makes the mesh (netgen's meshing is cached on disk after the first time and is not timed), assembles and factors
+the hemisphere's K twice with NGSolve (the faster kept), then times ``workbench.run``. Per level: dofs, the solvers
+taken, back-substitutions and conjugate gradient iterations, the assembly of K, the factorization, the run, their
+ratio, and the process's peak memory. Writes ``hertz_ratio.csv`` (about 6 minutes at the default levels; the last,
+193k dofs, takes 4 of them and 3 GB). ``--compare``: each level also without the half-space preconditioner of the
+coupled contact solver (``HalfSpace.bounds = (0, 0)``: the diagonal one), in the same run (``preconditioner``
+column).
+"""
+from __future__ import annotations
+
+import argparse
+import csv
+import json
+import os
+import subprocess
+import sys
+from pathlib import Path
+
+CHILD = """
+import json, resource, sys, time
+sys.path.insert(0, "studies")
+from threadpoolctl import threadpool_limits
+import workbench
+from workbench.discrete import discretisation, solvers
+from workbench.schemes.coupled_contact import HalfSpace
+hc, preconditioner = float(sys.argv[1]), sys.argv[2]
+if preconditioner == "diagonal":
+    HalfSpace.bounds = (0, 0)
+with threadpool_limits(1):
+    times = []
+    for _ in range(2):
+        d = discretisation.build(workbench.scene("memory_hertz3d", h_contact=hc))
+        t0 = time.perf_counter()
+        d.elastic.Assemble()
+        t1 = time.perf_counter()
+        solvers.factor(d.elastic.mat, d.fes.FreeDofs(), d.u.vec, "sparsecholesky")
+        times.append((t1 - t0, time.perf_counter() - t1))
+        del d
+    assemble, factor = min(times, key=lambda t: t[1])
+    t0 = time.perf_counter()
+    ds = workbench.run("memory_hertz3d", h_contact=hc, progress=False, threads=1)
+    run = time.perf_counter() - t0
+print(json.dumps(dict(h_contact=hc, preconditioner=preconditioner, ndof=int(ds.attrs["ndof"]),
+                      contact_vertices=int(ds.sizes["node"]),
+                      contact_solver=ds.attrs["contact_solver_used"], linear_solver=ds.attrs["linear_solver"],
+                      backsubs=int(ds.linear_solves.sum()),
+                      cg_iterations=int(ds.linear_iterations.sum()) if "linear_iterations" in ds else 0,
+                      assemble=round(assemble, 2), factor_sparsecholesky=round(factor, 2), run=round(run, 2),
+                      ratio=round(run / factor, 2),
+                      peak_mb=round(resource.getrusage(resource.RUSAGE_SELF).ru_maxrss / 1024.0))))
+"""
+
+
+def one(hc: float, preconditioner: str) -> dict:
+    env = dict(os.environ, OMP_NUM_THREADS="1", MKL_NUM_THREADS="1", OPENBLAS_NUM_THREADS="1")
+    done = subprocess.run([sys.executable, "-c", CHILD, str(hc), preconditioner], capture_output=True, text=True,
+                          env=env, check=True)
+    return json.loads(done.stdout.strip().splitlines()[-1])
+
+
+def main():
+    p = argparse.ArgumentParser(description=__doc__.splitlines()[0])
+    p.add_argument("--out", default="data/hertz")
+    p.add_argument("--levels", type=float, nargs="+", default=[0.005, 0.0035, 0.0025])
+    p.add_argument("--compare", action="store_true")
+    args = p.parse_args()
+    rows = []
+    for hc in args.levels:
+        for preconditioner in ("half-space", "diagonal") if args.compare else ("half-space",):
+            rows.append(one(hc, preconditioner))
+            print(rows[-1], flush=True)
+    out = Path(args.out)
+    out.mkdir(parents=True, exist_ok=True)
+    with open(out / "hertz_ratio.csv", "w", newline="") as f:
+        writer = csv.DictWriter(f, fieldnames=list(rows[0]))
+        writer.writeheader()
+        writer.writerows(rows)
+    print("| h_contact | dofs | contact vertices | solver | preconditioner | back-substitutions (CG) | assemble K | "
+          "factor K | run | run / factor | peak |\n|" + "---|" * 11)
+    for r in rows:
+        print(f"| {r['h_contact']} | {r['ndof']} | {r['contact_vertices']} | {r['contact_solver']}, "
+              f"{r['linear_solver']} | {r['preconditioner']} | {r['backsubs']} ({r['cg_iterations']}) | "
+              f"{r['assemble']} s | "
+              f"{r['factor_sparsecholesky']} s | {r['run']} s | {r['ratio']} x | {r['peak_mb']} MB |")
+
+
+if __name__ == "__main__":
+    main()
