@@ -6,6 +6,8 @@ body, element order, layer state and memory rule; the independent reference is t
 tests/test_memory.py (run here with the coupled solver too). The cost test asserts what the solver is for: far
 fewer back-substitutions than contact points (the condensed solver needs one per point before its first step).
 """
+import warnings
+
 import numpy as np
 import pytest
 
@@ -161,6 +163,21 @@ def test_the_half_space_compliance_gives_boussinesqs_loaded_circle():
     assert deflection[centre] == pytest.approx(2 * p * A, rel=0.003)
     assert deflection[-1] == pytest.approx(4 * p * A / np.pi, rel=0.01)
     assert np.linalg.eigvalsh(G).min() > 0  # (positive definite: it is factored)
+
+
+def test_the_half_space_compliance_stays_finite_for_coincident_points():
+    """Two contact points at one place (a seam of a mesh read from a file): no division by zero, and the matrix is
+    still factored or the preconditioner declines (the diagonal one then)."""
+    from workbench.schemes.coupled_contact import HalfSpace
+
+    x = np.array([[0.0, 0.0, 0.0], [0.0, 0.0, 0.0], [0.1, 0.0, 0.0]])
+    half = HalfSpace(x, np.full(3, 0.01))
+    with warnings.catch_warnings():
+        warnings.simplefilter("error")
+        G = half.compliance(np.arange(3))
+        apply = half.preconditioner(np.arange(3), np.zeros(3), np.ones(3))
+    assert np.all(np.isfinite(G))
+    assert apply is None or np.all(np.isfinite(apply(np.ones(3))))
 
 
 def test_the_half_space_preconditioner_cuts_the_back_substitutions(monkeypatch):

@@ -247,9 +247,12 @@ class HalfSpace:
         G += sq[None, :]
         np.maximum(G, 0.0, out=G)
         np.sqrt(G, out=G)
-        np.fill_diagonal(G, 1.0)
+        a = np.sqrt(self.w[U] / np.pi)
+        # (two points nearer than their discs' radii, which a fair mesh never has: the point force's formula no longer
+        # holds there, and coincident points would divide by 0)
+        np.maximum(G, 0.5 * (a[:, None] + a[None, :]), out=G)
         np.divide(1.0 / np.pi, G, out=G)
-        np.fill_diagonal(G, 2.0 / (np.pi * np.sqrt(self.w[U] / np.pi)))
+        np.fill_diagonal(G, 2.0 / (np.pi * a))
         return G
 
     def preconditioner(self, U: np.ndarray, D: np.ndarray, diagonal: np.ndarray):
