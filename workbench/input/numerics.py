@@ -83,7 +83,9 @@ COUPLED_PER_STEP, COUPLED_FROM = 20, 5000
 #: condensed solver's setup costs about one factorization, and what limits it is its dense work on the points whose
 #: position is unknown, ~m^3/3 per active-set iteration: ``auto`` condenses up to COUPLED_FROM_SCHUR unknowns
 #: (measured, ``studies/contact_solver.py --pardiso``: the hemisphere at 1291 points, condensed 1.7 s, coupled 2.3 s;
-#: at 5186 points 39.6 s and 9.8 s; the block at 440 points and 52 steps, 5.8 s and 21.5 s).
+#: at 5186 points 39.6 s and 9.8 s; the block at 440 points and 52 steps, 5.8 s and 21.5 s). Model B's 3D contact
+#: vertices, whose coupled solve the half-space preconditions, pass sooner
+#: (:func:`workbench.schemes.coupled_contact.condensed_up_to`).
 COUPLED_FROM_SCHUR = 2500
 
 
@@ -144,10 +146,12 @@ class Numerics:
         """Whether the steps are error-controlled."""
         return is_adaptive(self.rtol)
 
-    def coupled_contact(self, unknowns: int, solver: str | None = None, schur: bool = False) -> bool:
+    def coupled_contact(self, unknowns: int, solver: str | None = None, schur: bool = False,
+                        condensed_up_to: int = COUPLED_FROM_SCHUR) -> bool:
         """Whether a contact problem of ``unknowns`` contact unknowns is solved on the whole body (``contact_solver``;
-        ``auto``: :data:`COUPLED_PER_STEP`, or :data:`COUPLED_FROM_SCHUR` where the factor forms the condensed
-        stiffness inside one factorization, ``schur``); ``solver``: the linear solver taken, when ``auto`` resolved it.
+        ``auto``: :data:`COUPLED_PER_STEP`, or from ``condensed_up_to`` (:data:`COUPLED_FROM_SCHUR`, or the scheme's
+        own figure where its coupled solve is cheaper) where the factor forms the condensed stiffness inside one
+        factorization, ``schur``); ``solver``: the linear solver taken, when ``auto`` resolved it.
 
         >>> Numerics("vi", k=0.25, T=1.0).coupled_contact(203), Numerics("vi", k=0.02, T=1.0).coupled_contact(440)
         (True, False)
@@ -159,7 +163,7 @@ class Numerics:
         if (solver or self.solver) == "cg":
             return True  # (an iterative solver has no factor to repeat the condensed solver's per-point solves with)
         if schur:
-            return unknowns >= COUPLED_FROM_SCHUR
+            return unknowns > condensed_up_to
         return unknowns >= min(COUPLED_PER_STEP * max(1.0, self.T / self.k), COUPLED_FROM)
 
     @property

@@ -40,6 +40,7 @@ import scipy.linalg as la
 
 from ..discrete import solvers
 from ..errors import NewtonFailed
+from ..input.numerics import COUPLED_FROM_SCHUR
 from ..physics.unilateral import COMPLIANT, RIGID, SEPARATED, STUCK
 
 
@@ -225,17 +226,16 @@ class HalfSpace:
 
     @classmethod
     def largest_for(cls, ndof: int, method: str) -> int:
-        """The most points worth a dense factor beside K's (``method``: the step's solver, ``ndof`` its dofs): m^3 / 3
-        flops (about 30 GFlop/s on one core) against two back-substitutions through the sparse factor's nonzeros nnz
-        (:func:`~workbench.discrete.solvers.sparse_factor_bytes`; 16 bytes each, read at about 10 GB/s), so
-        m^3 = 288 nnz, within :attr:`bounds`. Measured on the hemisphere at 193k dofs (4700 points in contact at the
-        end): 3760 points, 274 back-substitutions and 78.6 s, against 355 and 79.6 s with 2000.
+        """The most points worth a dense factor beside K's (``method``: the step's solver, ``ndof`` its dofs): as
+        many as cost two back-substitutions (:func:`dense_points`), within :attr:`bounds`. Measured on the
+        hemisphere at 193k dofs (4700 points in contact at the end): 3760 points, 274 back-substitutions and 78.6 s,
+        against 355 and 79.6 s with 2000.
 
         >>> [HalfSpace.largest_for(n, "sparsecholesky") for n in (12_000, 46_938, 193_464, 500_000)]
         [2000, 2473, 4640, 5000]
         """
-        nnz = solvers.sparse_factor_bytes(3, ndof, method) / 8.0
-        return int(np.clip(round((288.0 * nnz) ** (1.0 / 3.0)), *cls.bounds))
+        return int(np.clip(dense_points(ndof, method, 2.0), *cls.bounds))
+
 
     def compliance(self, U: np.ndarray) -> np.ndarray:
         """The half-space's compliance between the points U (in units of (1 - nu^2) / E), dense."""
@@ -271,6 +271,35 @@ class HalfSpace:
                 self._key, self._factor = key, None
         factor = self._factor
         return None if factor is None else (lambda r: la.cho_solve(factor, r, check_finite=False))
+
+
+def dense_points(ndof: int, method: str, backsubs: float) -> int:
+    """The number of points m whose dense Cholesky factor costs as much as ``backsubs`` back-substitutions through
+    the sparse factor of K (``method``, ``ndof`` dofs, 3D): m^3 / 3 flops at about 30 GFlop/s on one core against
+    16 bytes read per nonzero of the factor (:func:`~workbench.discrete.solvers.sparse_factor_bytes`) at about
+    10 GB/s, so m^3 = 144 backsubs nnz.
+
+    >>> dense_points(46_938, "sparsecholesky", 2.0)
+    2473
+    """
+    nnz = solvers.sparse_factor_bytes(3, ndof, method) / 8.0
+    return int(round((144.0 * backsubs * nnz) ** (1.0 / 3.0)))
+
+
+def condensed_up_to(ndof: int, method: str) -> int:
+    """The most 3D contact vertices ``contact_solver = "auto"`` condenses where the factor forms their Schur
+    complement (Model B): the condensed solver factors its free points' block densely at each active-set iteration,
+    the coupled one, preconditioned by the half-space, pays about 3 back-substitutions for one (measured on the
+    hemisphere: 162 for 48 at 47k dofs, 132 for 35 at 12k). So up to :func:`dense_points` of 3 back-substitutions,
+    and never more than :data:`~workbench.input.numerics.COUPLED_FROM_SCHUR`. Measured on the hemisphere from rest to
+    the full load, one thread, condensed against coupled: 616 points (5.8k dofs) 0.40-0.57 s against 0.49-0.80 s;
+    922 (8.2k) 0.78-0.83 s against 0.79-1.02 s; 1291 (12k) 1.54-1.76 s against 1.48-1.70 s; 2449 (22k dofs)
+    6.05-6.10 s against 2.80-2.84 s.
+
+    >>> [condensed_up_to(n, "sparsecholesky") for n in (5_817, 11_865, 22_074)]
+    [1119, 1536, 2024]
+    """
+    return min(dense_points(ndof, method, 3.0), COUPLED_FROM_SCHUR)
 
 
 class KrylovMemory:

@@ -69,10 +69,11 @@ import numpy as np
 
 from ..discrete import solvers
 from ..discrete.condensation import CondensedSystem, SchurOperator
+from ..input.numerics import COUPLED_FROM_SCHUR
 from ..physics import unilateral
 from .base import ErrorControlled, Observer, Scheme, first_event
 from .contact_nodes import ContactNodes
-from .coupled_contact import CoupledActiveSet
+from .coupled_contact import CoupledActiveSet, condensed_up_to
 from .memory_rules import rule_for
 
 
@@ -105,7 +106,9 @@ class MemoryVI(ErrorControlled, Scheme):
         x.bind(self.nodes.C if x.solves else ())
         self.method = d.step_solver()
         self.coupled = None
-        if d.numerics.coupled_contact(self.size, self.method, solvers.forms_schur(self.method)):
+        # (3D vertices: the coupled solve has the half-space preconditioner, and wins from fewer points)
+        limit = condensed_up_to(d.ndof, self.method) if self.vertices_only and d.dim == 3 else COUPLED_FROM_SCHUR
+        if d.numerics.coupled_contact(self.size, self.method, solvers.forms_schur(self.method), limit):
             self.coupled = CoupledActiveSet(self.nodes, self.method, d.ndof) if x.solves else True
         self.memory = rule_for(d, self.trapezoid)  # (None without memory)
         self._balance = None  # f - memory of the last equilibrium (only for the reaction of pinned contact nodes)
