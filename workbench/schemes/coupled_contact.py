@@ -245,12 +245,11 @@ class HalfSpace:
         G *= -2.0
         G += sq[:, None]
         G += sq[None, :]
-        np.maximum(G, 0.0, out=G)
-        np.sqrt(G, out=G)
         a = np.sqrt(self.w[U] / np.pi)
-        # (two points nearer than their discs' radii, which a fair mesh never has: the point force's formula no longer
-        # holds there, and coincident points would divide by 0)
-        np.maximum(G, 0.5 * (a[:, None] + a[None, :]), out=G)
+        # (no two points nearer than the smallest disc's radius, which a fair mesh never has: the point force's
+        # formula no longer holds there, and coincident points would divide by 0)
+        np.maximum(G, a.min() ** 2, out=G)
+        np.sqrt(G, out=G)
         np.divide(1.0 / np.pi, G, out=G)
         np.fill_diagonal(G, 2.0 / (np.pi * a))
         return G
