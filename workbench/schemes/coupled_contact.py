@@ -14,7 +14,8 @@ states the forces at the points solve
 
 an SPD system on the points whose force is unknown, solved by conjugate gradients: a product with S is one
 back-substitution of the factored K (:class:`workbench.discrete.condensation.SchurOperator`), the
-preconditioner the diagonal 1 / (1 / K_ii + 1 / (w_i c)). While the states still change the system is solved
+preconditioner the diagonal 1 / (1 / K_ii + 1 / (w_i c)), or on 3D contact vertices an elastic half-space's
+compliance between the points (:class:`HalfSpace`). While the states still change the system is solved
 loosely (its first residual reduced by :attr:`CoupledActiveSet.loose`, but never below the tight target: a system
 that starts at its solution, as each step after the first under a load held from t = 0, takes no iteration): the
 states only need the sign of each point's prediction; once they settle it is solved to
@@ -217,7 +218,8 @@ class HalfSpace:
     [[2.0, 1.0], [1.0, 2.0]]
     """
 
-    #: The fewest and the most points :meth:`largest_for` lets a set of unknown points have and be factored.
+    #: The range of :meth:`largest_for` (the most points factored): never fewer than the first, nor more than the
+    #: second (a matrix of 200 MB).
     bounds = (2000, 5000)
 
     def __init__(self, positions: np.ndarray, w: np.ndarray, largest: int = 2000):
@@ -235,7 +237,6 @@ class HalfSpace:
         [2000, 2473, 4640, 5000]
         """
         return int(np.clip(dense_points(ndof, method, 2.0), *cls.bounds))
-
 
     def compliance(self, U: np.ndarray) -> np.ndarray:
         """The half-space's compliance between the points U (in units of (1 - nu^2) / E), dense."""
