@@ -194,8 +194,8 @@ class CoupledActiveSet:
             r = b - S_x[U] - D * x[U]  # (the true residual: S x is kept alongside)
         residual = np.abs(r).max() / tol
         raise NewtonFailed(f"the coupled contact solve (conjugate gradients on {U.size} contact points) did not reach "
-                           f"its tolerance in {limit} iterations at t = {time:.6g} s (residual {residual:.2g} x the tolerance); try "
-                           "contact_solver = 'condensed'", time=time)
+                           f"its tolerance in {limit} iterations at t = {time:.6g} s (residual {residual:.2g} x the "
+                           "tolerance); try contact_solver = 'condensed'", time=time)
 
 
 class HalfSpace:
