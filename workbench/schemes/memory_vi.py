@@ -34,7 +34,8 @@ condensed onto the contact vertices' normal dofs (S0 = (K_A^-1)_CC, one back-sub
 contact point and operator); ``coupled``: S0 is never formed, each state's system is solved by
 conjugate gradients on the active points, one back-substitution per iteration
 (:mod:`.coupled_contact`; for thousands of contact points, 3D); ``auto`` picks by the cost of each
-(:meth:`workbench.input.numerics.Numerics.coupled_contact`). Condensed, a step costs one back-substitution for the contact-free displacement z,
+(:meth:`workbench.input.numerics.Numerics.coupled_contact`). Condensed, a step costs one back-substitution for the
+contact-free displacement z,
 a primal-dual active-set iteration on the contact nodes (states separated /
 stuck / compliant / rigid, :mod:`workbench.physics.unilateral`; each iteration
 one small dense solve, exact once the states are right, warm-started from the
@@ -78,7 +79,8 @@ from .memory_rules import rule_for
 
 
 class MemoryVI(ErrorControlled, Scheme):
-    """One variational inequality per step, memory by recursion or quadrature, left rectangle or trapezoid (module docs)."""
+    """One variational inequality per step, memory by recursion or quadrature, left rectangle or trapezoid (module
+    docs)."""
 
     name = "vi"
     cache_size = 4
