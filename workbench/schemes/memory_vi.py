@@ -79,8 +79,7 @@ from .memory_rules import rule_for
 
 
 class MemoryVI(ErrorControlled, Scheme):
-    """One variational inequality per step, memory by recursion or quadrature, left rectangle or trapezoid (module
-    docs)."""
+    """One variational inequality per step, memory by recursion or quadrature, left rectangle or trapezoid."""
 
     name = "vi"
     cache_size = 4
@@ -108,7 +107,6 @@ class MemoryVI(ErrorControlled, Scheme):
         x.bind(self.nodes.C if x.solves else ())
         self.method = d.step_solver()
         self.coupled = None
-        # (3D vertices: the coupled solve has the half-space preconditioner, and wins from fewer points)
         limit = condensed_up_to(d.ndof, self.method) if self.vertices_only and d.dim == 3 else COUPLED_FROM_SCHUR
         if d.numerics.coupled_contact(self.size, self.method, solvers.forms_schur(self.method), limit):
             self.coupled = CoupledActiveSet(self.nodes, self.method, d.ndof) if x.solves else True
