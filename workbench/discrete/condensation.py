@@ -65,12 +65,23 @@ class ContactOperator:
         q = self.contact.tangential_traction(NP, self.side.u_tau(u_C), beta) if self.tangential else None
         return self.side.integrate(p, q)
 
-    def jacobian(self, u_C: np.ndarray, dense: bool = True):
-        """df/du_C as a |C| x |C| matrix, dense or sparse (semismooth: the active branch of each kink)."""
+    def _slopes(self, u_C: np.ndarray):
         beta = self._beta()
         slope = self.contact.normal_slope(self.side.u_nu(u_C), beta, self.side.gap0)
-        tslope = self.contact.tangential_slope(self.side.u_tau(u_C), beta) if self.tangential else None
-        return self.side.jacobian(slope, tslope, dense)
+        return slope, self.contact.tangential_slope(self.side.u_tau(u_C), beta) if self.tangential else None
+
+    def jacobian(self, u_C: np.ndarray, dense: bool = True):
+        """df/du_C as a |C| x |C| matrix, dense or sparse (semismooth: the active branch of each kink)."""
+        return self.side.jacobian(*self._slopes(u_C), dense=dense)
+
+    def dof_points(self):
+        """Each contact dof as a point of the side, (positions, areas): the area its share of the side, sum_q w_q
+        |phi(x_q)|, the position the mean of the quadrature points weighted by it (the half-space preconditioner of
+        :class:`CoupledNewton`)."""
+        side = self.side
+        T = abs(side.T_nu)
+        area = T.T @ side.weights
+        return (T.T @ (side.weights[:, None] * side.side.xyz)) / np.maximum(area, 1e-300)[:, None], area
 
 
 class CondensedSystem:
@@ -245,37 +256,64 @@ class CoupledNewton:
     (M^{-1})_CC is applied by one back-substitution (:class:`SchurOperator`) and never formed.
 
     The iterate is the contact force phi with u_C = z_C - S0 phi, so that S0^{-1} (u_C - z_C) = -phi and the residual
-    is g = f(u_C) - phi. A Newton direction solves (S0^{-1} + J) s = -g by conjugate gradients preconditioned by S0
-    itself (one back-substitution an iteration; the preconditioned operator is I + S0 J, so a soft compliance needs
-    one or two iterations), carrying s~ = S0^{-1} s along the recurrences, so phi is updated as phi - a s~ without
-    inverting S0. The inner solves stop at :attr:`inner` times their first residual (inexact Newton); the globalisation
-    is the line search of :class:`CondensedNewton` on the same convex energy. ``linear_iterations`` counts the inner
-    iterations. Started from the forces at the caller's guess of u_C.
+    is g = f(u_C) - phi. A Newton direction s solves (S0^{-1} + J) s = -g = b and comes with s~ = S0^{-1} s, so phi is
+    updated as phi - a s~ without inverting S0. The inner solves stop at :attr:`inner` times their first residual
+    (inexact Newton); the globalisation is the line search of :class:`CondensedNewton` on the same convex energy.
+    ``linear_iterations`` counts the inner iterations (one back-substitution each). Started from the forces at the
+    caller's guess of u_C.
+
+    Where the Jacobian acts on the normal dofs alone (a normal compliance, no glue) and ``halfspace`` is given (a
+    :class:`~workbench.schemes.coupled_contact.HalfSpace` over the contact dofs, 3D), the direction is found in the
+    springs' forces t = J s on the dofs R where J is not 0 (Woodbury):
+
+        (J_RR^-1 + S0_RR) t = (S0 b)_R,      s = S0 (b - t),      s~ = b - t,
+
+    by conjugate gradients preconditioned by (J_RR^-1 + c G_RR)^-1, G the half-space's compliance scaled to S0's
+    diagonal estimate (dense, factored once a Newton step). Preconditioned by S0 instead, the system in s has the
+    operator I + S0 J, whose spread grows with the springs' stiffness: a stiff compliance took 31 inner iterations a
+    Newton step on the hemisphere at 12k dofs (c_nu = 1e7), against about 20 here. Otherwise, and past
+    ``halfspace.largest`` dofs in R, s is found that way.
+
+    The first iterate is the Newton step from the caller's u_C (a linear extrapolation of the last steps): u_C + s
+    with (S0^-1 + J) s = -g(u_C), found without S0^-1 as u_C + s - z_C = v, (S0^-1 + J) v = J (u_C - z_C) - f(u_C),
+    its force -S0^-1 v coming along. Starting instead from phi = f(u_C), a stiff spring turns the guess's small
+    penetrations into large forces that lift the body off, and the iteration climbs back a few points at a time
+    (measured on the same run: 250 Newton iterations, against 68 for the condensed solver).
     """
 
     inner = 1e-4
 
     def __init__(self, schur: SchurOperator, operator: ContactOperator, rtol: float = 1e-10,
-                 max_iterations: int = 40):
+                 max_iterations: int = 40, halfspace=None):
         self.schur, self.op, self.rtol, self.max_iterations = schur, operator, rtol, max_iterations
+        self.halfspace = halfspace
         self.iterations = self.linear_iterations = 0
 
     def solve(self, u_C: np.ndarray, z_C: np.ndarray, time: float, label: str = "") -> np.ndarray:
-        S, op = self.schur, self.op
-        phi = op.force(u_C)
-        u_C[:] = z_C - S.apply(phi)
+        op = self.op
+        # the start: the Newton step from the caller's u_C, u_C + s with (S0^-1 + J) s = -g(u_C), found without
+        # S0^-1 as u_C + s - z_C = v, (S0^-1 + J) v = J (u_C - z_C) - f(u_C); its force phi = -S0^-1 v comes along
+        v, v_t = self._direction(u_C, op.jacobian(u_C, dense=False) @ (u_C - z_C) - op.force(u_C), self.inner)
+        self.iterations += 1
+        u_C[:] = z_C + v
+        phi = -v_t
         f = op.force(u_C)
-        g_norm = np.inf
+        g_norm = last = np.inf
         for it in range(self.max_iterations + 1):
             g = f - phi
             g_norm = np.abs(g).max()
             if not np.isfinite(g_norm):
                 break
-            if g_norm <= self.rtol * max(np.abs(phi).max(), np.abs(f).max(), 1e-300):
+            target = self.rtol * max(np.abs(phi).max(), np.abs(f).max(), 1e-300)
+            if g_norm <= target:
                 return f
             if it == self.max_iterations:
                 break
-            step, step_t = self._direction(op.jacobian(u_C, dense=False), -g)
+            # the inner tolerance (Eisenstat and Walker's second forcing term): loose while the residual falls
+            # slowly (the branches still change), tight once it falls fast, never finer than the Newton target
+            eta = float(np.clip((g_norm / last) ** 2, 0.1 * target / g_norm, self.inner))
+            last = g_norm
+            step, step_t = self._direction(u_C, -g, eta)
             self.iterations += 1
             slope0 = float(g @ step)
             f_new = op.force(u_C + step)
@@ -289,7 +327,63 @@ class CoupledNewton:
         raise NewtonFailed(f"{label}: semismooth Newton (coupled) did not converge in {self.iterations} iterations "
                            f"at t = {time:.6g} s (residual {g_norm:.3g}); try a smaller k", time=time)
 
-    def _direction(self, J, b):
+    def _direction(self, u_C, b, eta):
+        """(s, S0^{-1} s) with (S0^{-1} + J(u_C)) s = b, to the relative tolerance ``eta`` (class docs)."""
+        if not np.any(b):
+            return np.zeros_like(b), np.zeros_like(b)
+        J = self.op.jacobian(u_C, dense=False)
+        if self.halfspace is None or self.op.tangential:
+            return self._in_displacements(J, b, eta)
+        R = np.nonzero(J.diagonal() > 0)[0]
+        if R.size > self.halfspace.largest:
+            return self._in_displacements(J, b, eta)
+        S_b = self.schur.apply(b)
+        if R.size == 0:
+            return S_b, b.copy()
+        found = self._in_forces(J[R][:, R].toarray(), R, b, S_b, eta)
+        return found if found is not None else self._in_displacements(J, b, eta)
+
+    def _in_forces(self, J, R, b, S_b, eta):
+        """The direction from the springs' forces t = J s on the dofs R (J: J_RR dense; class docs); None should J_RR
+        have no Cholesky factor."""
+        S = self.schur
+        # (J_RR could be singular, were some dof's elements to touch at too few quadrature points; never seen on the
+        # hemisphere, even with random penetrations. 1e-10 of its diagonal would make such a mode a compliance 1e10
+        # times the rest, which the preconditioner holds exactly: no force there, as without it)
+        J[np.diag_indices_from(J)] *= 1.0 + 1e-10
+        try:
+            spring = la.cho_factor(J, check_finite=False)
+            G = self.halfspace.compliance(R)
+            G *= np.median(1.0 / (S.stiffness[R] * np.diag(G)))  # (the half-space's scale: S0's diagonal estimate)
+            G += la.cho_solve(spring, np.eye(R.size), check_finite=False)
+            model = la.cho_factor(0.5 * (G + G.T), check_finite=False)
+        except la.LinAlgError:
+            return None
+        t, S_t, p = np.zeros(R.size), np.zeros_like(b), np.zeros_like(b)
+        r = S_b[R].copy()
+        z = la.cho_solve(model, r, check_finite=False)
+        d, rz = z.copy(), float(r @ z)
+        # (the residual of the system in s is J_RR r on R: measured in forces, as the Newton residual)
+        target = eta * np.abs(b).max()
+        for _ in range(max(50, R.size)):
+            if np.abs(J @ r).max() <= target:
+                break
+            p[R] = d
+            S_p = S.apply(p)
+            self.linear_iterations += 1
+            A_d = la.cho_solve(spring, d, check_finite=False) + S_p[R]
+            a = rz / float(d @ A_d)
+            t += a * d
+            S_t += a * S_p
+            r -= a * A_d
+            z = la.cho_solve(model, r, check_finite=False)
+            rz, rz_old = float(r @ z), rz
+            d = z + (rz / rz_old) * d
+        s_t = b.copy()
+        s_t[R] -= t
+        return S_b - S_t, s_t
+
+    def _in_displacements(self, J, b, eta):
         """(s, S0^{-1} s) with (S0^{-1} + J) s = b, by conjugate gradients preconditioned by S0 (class docs)."""
         S = self.schur
         x, x_t = np.zeros_like(b), np.zeros_like(b)
@@ -307,7 +401,7 @@ class CoupledNewton:
             self.linear_iterations += 1
             z = S.apply(r)
             rz, rz_old = float(r @ z), rz
-            if np.sqrt(abs(rz)) <= self.inner * first:
+            if np.sqrt(abs(rz)) <= eta * first:
                 break
             beta = rz / rz_old
             p = z + beta * p

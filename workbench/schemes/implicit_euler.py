@@ -43,6 +43,7 @@ from ..discrete import solvers
 from ..discrete.condensation import CondensedNewton, CondensedSystem, ContactOperator, CoupledNewton, SchurOperator
 from ..physics.ops import NP
 from .base import ErrorControlled
+from .coupled_contact import HalfSpace
 from .model_a import KelvinVoigtScheme, kink_event
 
 
@@ -132,7 +133,8 @@ class ImplicitEuler(ErrorControlled, KelvinVoigtScheme):
             M = d.viscous.mat.CreateMatrix()
             M.AsVector().data = built_from * d.viscous.mat.AsVector() + d.elastic.mat.AsVector()
             solver = d.step_factor(M)
-            newton = self.exchange.run(lambda: self._newton(solver), solver) if self.contact else None
+            diagonal = self.exchange.diagonal(M) if self.coupled else None  # (on every process: it gathers)
+            newton = self.exchange.run(lambda: self._newton(solver, diagonal), solver) if self.contact else None
             split = solver.split(self.op.C) if self.op is not None and not self.coupled else None
             self._factors[key] = (M, solver, newton, built_from, split)
             while len(self._factors) > self.cache_size:
@@ -141,11 +143,16 @@ class ImplicitEuler(ErrorControlled, KelvinVoigtScheme):
         self.M, self.solver, self.newton, _, self.split = self._factors[key]
         self.resolved = self.bonding is None or self.bonding.resolved(k, d.model.beta0)
 
-    def _newton(self, solver):
-        """The contact solver of the operator ``solver`` solves (where the contact problem is solved)."""
+    def _newton(self, solver, diagonal=None):
+        """The contact solver of the operator ``solver`` solves (where the contact problem is solved); ``diagonal``:
+        the operator's (the coupled solver's preconditioner)."""
         view, proxy = self.exchange.view, self.exchange.proxy(solver)
         if self.coupled:
-            return CoupledNewton(SchurOperator(proxy, view.ndof, self.op.C), self.op)
+            halfspace = None
+            if view.dim == 3 and not self.op.tangential:
+                halfspace = HalfSpace(*self.op.dof_points(), HalfSpace.largest_for(view.ndof, self.method))
+            return CoupledNewton(SchurOperator(proxy, view.ndof, self.op.C, diagonal=diagonal), self.op,
+                                 halfspace=halfspace)
         return CondensedNewton(CondensedSystem(proxy, view.ndof, self.op.C), self.op)
 
     def _cache_state(self) -> list:
