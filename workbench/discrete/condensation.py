@@ -32,6 +32,8 @@ from __future__ import annotations
 
 import numpy as np
 import scipy.linalg as la
+import scipy.sparse as sp
+import scipy.sparse.linalg as spla
 
 from ..errors import NewtonFailed
 from ..physics.ops import NP
@@ -268,11 +270,12 @@ class CoupledNewton:
 
         (J_RR^-1 + S0_RR) t = (S0 b)_R,      s = S0 (b - t),      s~ = b - t,
 
-    by conjugate gradients preconditioned by (J_RR^-1 + c G_RR)^-1, G the half-space's compliance scaled to S0's
-    diagonal estimate (dense, factored once a Newton step). Preconditioned by S0 instead, the system in s has the
-    operator I + S0 J, whose spread grows with the springs' stiffness: a stiff compliance took 31 inner iterations a
-    Newton step on the hemisphere at 12k dofs (c_nu = 1e7), against about 20 here. Otherwise, and past
-    ``halfspace.largest`` dofs in R, s is found that way.
+    J_RR^-1 by a sparse LU factor, by conjugate gradients preconditioned by (J_RR^-1 + c G_RR)^-1, G the half-space's
+    compliance scaled to S0's diagonal estimate (a dense LU factor per set of springs). Preconditioned by S0 instead,
+    the system in s has the operator I + S0 J, whose spread grows with the springs' stiffness. Measured on the
+    hemisphere (hertz3d, tau = 1e-3, 10 steps; ``studies/model_a_contact.py``) at 12k dofs, c_nu = 1e7: 31 inner
+    iterations a Newton step before, 13 here. Otherwise, and past ``halfspace.largest`` dofs in R, s is found that
+    way.
 
     The first iterate is the Newton step from the caller's u_C (a linear extrapolation of the last steps): u_C + s
     with (S0^-1 + J) s = -g(u_C), found without S0^-1 as u_C + s - z_C = v, (S0^-1 + J) v = J (u_C - z_C) - f(u_C),
@@ -287,6 +290,7 @@ class CoupledNewton:
                  max_iterations: int = 40, halfspace=None):
         self.schur, self.op, self.rtol, self.max_iterations = schur, operator, rtol, max_iterations
         self.halfspace = halfspace
+        self._key = self._factor = None
         self.iterations = self.linear_iterations = 0
 
     def solve(self, u_C: np.ndarray, z_C: np.ndarray, time: float, label: str = "") -> np.ndarray:
@@ -340,28 +344,26 @@ class CoupledNewton:
         S_b = self.schur.apply(b)
         if R.size == 0:
             return S_b, b.copy()
-        found = self._in_forces(J[R][:, R].toarray(), R, b, S_b, eta)
+        found = self._in_forces(J[R][:, R], R, b, S_b, eta)
         return found if found is not None else self._in_displacements(J, b, eta)
 
     def _in_forces(self, J, R, b, S_b, eta):
-        """The direction from the springs' forces t = J s on the dofs R (J: J_RR dense; class docs); None should J_RR
-        have no Cholesky factor."""
+        """The direction from the springs' forces t = J s on the dofs R (J: J_RR, sparse; class docs); None should
+        J_RR be singular."""
         S = self.schur
-        # (J_RR could be singular, were some dof's elements to touch at too few quadrature points; never seen on the
-        # hemisphere, even with random penetrations. 1e-10 of its diagonal would make such a mode a compliance 1e10
-        # times the rest, which the preconditioner holds exactly: no force there, as without it)
-        J[np.diag_indices_from(J)] *= 1.0 + 1e-10
+        # J_RR is singular where the springs miss some combination of R's dofs (a dof whose elements touch at fewer
+        # quadrature points than the dofs they couple: most Newton steps on the hemisphere). 1e-10 of its diagonal
+        # makes such a mode a compliance 1e10 times the rest, which the preconditioner holds exactly: no force there,
+        # as without it
+        J = (J + sp.diags(1e-10 * J.diagonal())).tocsr()
         try:
-            spring = la.cho_factor(J, check_finite=False)
-            G = self.halfspace.compliance(R)
-            G *= np.median(1.0 / (S.stiffness[R] * np.diag(G)))  # (the half-space's scale: S0's diagonal estimate)
-            G += la.cho_solve(spring, np.eye(R.size), check_finite=False)
-            model = la.cho_factor(0.5 * (G + G.T), check_finite=False)
-        except la.LinAlgError:
+            spring = spla.splu(J.tocsc())
+        except RuntimeError:
             return None
+        precondition = self._preconditioner(J, R)
         t, S_t, p = np.zeros(R.size), np.zeros_like(b), np.zeros_like(b)
         r = S_b[R].copy()
-        z = la.cho_solve(model, r, check_finite=False)
+        z = precondition(r)
         d, rz = z.copy(), float(r @ z)
         # (the residual of the system in s is J_RR r on R: measured in forces, as the Newton residual)
         target = eta * np.abs(b).max()
@@ -371,17 +373,30 @@ class CoupledNewton:
             p[R] = d
             S_p = S.apply(p)
             self.linear_iterations += 1
-            A_d = la.cho_solve(spring, d, check_finite=False) + S_p[R]
+            A_d = spring.solve(d) + S_p[R]
             a = rz / float(d @ A_d)
             t += a * d
             S_t += a * S_p
             r -= a * A_d
-            z = la.cho_solve(model, r, check_finite=False)
+            z = precondition(r)
             rz, rz_old = float(r @ z), rz
             d = z + (rz / rz_old) * d
         s_t = b.copy()
         s_t[R] -= t
         return S_b - S_t, s_t
+
+    def _preconditioner(self, J, R):
+        """r -> (J_RR^-1 + c G_RR)^-1 r = (I + J_RR c G_RR)^-1 J_RR r, an LU factor of the bracket (2/3 |R|^3: G is
+        dense, J sparse), kept while R and J_RR stay (the last Newton steps, the springs settled)."""
+        key = (R.tobytes(), J.indices.tobytes(), J.data.tobytes())
+        if key != self._key:
+            G = self.halfspace.compliance(R)
+            G *= np.median(1.0 / (self.schur.stiffness[R] * np.diag(G)))  # (the scale of S0's diagonal estimate)
+            G = J @ G
+            G[np.diag_indices_from(G)] += 1.0
+            self._key, self._factor = key, la.lu_factor(G, check_finite=False)
+        factor = self._factor
+        return lambda r: la.lu_solve(factor, J @ r, check_finite=False)
 
     def _in_displacements(self, J, b, eta):
         """(s, S0^{-1} s) with (S0^{-1} + J) s = b, by conjugate gradients preconditioned by S0 (class docs)."""
