@@ -33,6 +33,7 @@ MODEL_A = {
     "tp4, point force (debonding)": ("tp4", dict(scheme="implicit", T=0.3)),
     "stiff compliance (Hertz 2D, c_nu = 1e7)": ("hertz", dict(c_nu=1e7, tau=1e-3, k=0.05)),
     "hemisphere": ("hertz3d", dict(k=0.1)),
+    "hemisphere P2, stiff compliance": ("hertz3d", dict(order=2, h_contact=0.04, c_nu=1e7, tau=1e-3, k=0.1, T=0.3)),
     "rod": ("tp3", dict(scheme="implicit", T=1.0)),
 }
 
