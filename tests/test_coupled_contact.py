@@ -104,16 +104,19 @@ def test_model_a_direction_solves_the_newton_system():
 def test_model_a_stiff_compliance_takes_about_the_condensed_newton_steps():
     """A stiff compliance (c_nu = 1e7) on the hemisphere: the coupled Newton started from phi = f(guess), which a
     stiff spring turns into a force that lifts the body off, and took 86 iterations where the condensed one takes 28
-    (measured). Started from the Newton step at the guess it takes 47, to the same solution."""
+    (measured); from the Newton step at the guess, 47, of them 25 in the first step, which started from the whole
+    side penetrating. From the energy's minimum on the ray of its spring forces there: 34 (12 in the first step, as
+    condensed), to the same solution."""
     a, b = _pair("hertz3d", STIFF_3D)
     assert float(np.abs(a.u_contact - b.u_contact).max()) <= 1e-8 * float(np.abs(a.u_contact).max())
-    assert int(b.newton_iterations.sum()) <= 2 * int(a.newton_iterations.sum())
+    assert int(b.newton_iterations.sum()) <= 1.5 * int(a.newton_iterations.sum())
+    assert int(b.newton_iterations[1]) <= int(a.newton_iterations[1]) + 2
 
 
 def test_the_half_space_preconditions_model_a_stiff_springs(monkeypatch):
     """The same run with the directions in the springs' forces, preconditioned by the half-space, against those of
-    the system in s preconditioned by S0 (``HalfSpace.bounds = (0, 0)``: no dof factored): measured 573 against
-    1563 inner iterations (back-substitutions), the same solution."""
+    the system in s preconditioned by S0 (``HalfSpace.bounds = (0, 0)``: no dof factored): measured 343 against
+    716 inner iterations (back-substitutions), the same solution."""
     from workbench.schemes.coupled_contact import HalfSpace
 
     with_it = workbench.run("hertz3d", contact_solver="coupled", progress=False, **STIFF_3D)
