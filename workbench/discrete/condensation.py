@@ -261,8 +261,7 @@ class CoupledNewton:
     is g = f(u_C) - phi. A Newton direction s solves (S0^{-1} + J) s = -g = b and comes with s~ = S0^{-1} s, so phi is
     updated as phi - a s~ without inverting S0. The inner solves stop at :attr:`inner` times their first residual
     (inexact Newton); the globalisation is the line search of :class:`CondensedNewton` on the same convex energy.
-    ``linear_iterations`` counts the inner iterations (one back-substitution each). Started from the forces at the
-    caller's guess of u_C.
+    ``linear_iterations`` counts the inner iterations (one back-substitution each).
 
     Where the Jacobian acts on the normal dofs alone (a normal compliance, no glue) and ``halfspace`` is given (a
     :class:`~workbench.schemes.coupled_contact.HalfSpace` over the contact dofs, 3D), the direction is found in the
@@ -274,7 +273,7 @@ class CoupledNewton:
     compliance scaled to S0's diagonal estimate (a dense LU factor per set of springs). Preconditioned by S0 instead,
     the system in s has the operator I + S0 J, whose spread grows with the springs' stiffness. Measured on the
     hemisphere (hertz3d, tau = 1e-3, 10 steps; ``studies/model_a_contact.py``) at 12k dofs, c_nu = 1e7: 31 inner
-    iterations a Newton step before, 13 here. Otherwise, and past ``halfspace.largest`` dofs in R, s is found that
+    iterations a Newton step before, 12 here. Otherwise, and past ``halfspace.largest`` dofs in R, s is found that
     way.
 
     The first iterate is the Newton step from the caller's u_C (a linear extrapolation of the last steps): u_C + s
