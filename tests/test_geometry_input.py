@@ -238,3 +238,18 @@ def test_the_hertz_mesh_cache_gives_the_mesh_it_would_make(tmp_path, monkeypatch
     with open(stored[0], "rb") as f:
         assert np.array_equal(np.array(pickle.load(f).Coordinates()), np.array(made.Coordinates()))
     assert meshes.RECIPES >= 1
+
+
+def test_the_hemispheres_load_is_spread_over_its_meshed_top():
+    """The flat top's area, from the netgen mesh's triangles (what the load is divided by), against NGSolve's
+    integral over the same boundary, and against the quarter disc it approximates (the polygon is a little smaller)."""
+    import ngsolve as ngs
+
+    from workbench.input import geometry
+
+    ngmesh = geometry._indenter_mesh("hemisphere", 1.0, 0.25, 0.04)
+    mesh = ngs.Mesh(ngmesh)
+    integral = ngs.Integrate(ngs.CF(1.0), mesh, ngs.BND, definedon=mesh.Boundaries("top"))
+    area = geometry._flat_boundary_area(ngmesh, "top")
+    assert area == pytest.approx(integral, rel=1e-13)
+    assert 0.98 * math.pi / 4 < area < math.pi / 4

@@ -543,15 +543,24 @@ class Hemisphere(_Indenter):
         return ((0.0, 0.0, 0.1 * R), (0.0, 0.0, 0.5 * R), (0.0, 0.0, R))
 
     def tractions(self, values):
-        import ngsolve as ngs
-
         from ..expressions import parse
 
         # the total load over the whole flat disc: 4 x the meshed quarter's area (its polygon, not pi R^2 / 4, so
         # that the force is the load exactly)
-        mesh = ngs.Mesh(self._netgen())
-        area = 4.0 * ngs.Integrate(ngs.CF(1.0), mesh, ngs.BND, definedon=mesh.Boundaries("top"))
+        area = 4.0 * _flat_boundary_area(self._netgen(), "top")
         return {"top": parse(f"(0, 0, -({values['load'].source}) / {area!r})", name="load", size=3)}
+
+
+def _flat_boundary_area(ngmesh, name: str) -> float:
+    """The area of the boundary ``name`` of a netgen mesh of straight triangles, from its vertices (making an NGSolve
+    mesh to integrate over it took 0.5 s at 193k dofs; this, 2 ms)."""
+    import numpy as np
+
+    elements = ngmesh.Elements2D().NumPy()
+    names = np.array([ngmesh.GetBCName(i) for i in range(ngmesh.GetNFaceDescriptors())])
+    corners = np.asarray(ngmesh.Coordinates())[elements["nodes"][names[elements["index"] - 1] == name] - 1]
+    return float(0.5 * np.linalg.norm(np.cross(corners[:, 1] - corners[:, 0], corners[:, 2] - corners[:, 0]),
+                                      axis=1).sum())
 
 
 #: The zone around the apex (the default of the scene parameter ``contact_zone``): the contact side within
