@@ -344,7 +344,7 @@ class CoupledNewton:
         """From the start where the guess had no contact (the free displacement, all of it penetrating): along the
         forces' ray phi + a d, u_C - a S0 d (d = f - phi, one back-substitution), to the energy's minimum on it, as
         the condensed solver's line-searched first step from the guess does. Measured on the hemisphere (c_nu = 1e7,
-        the first step from rest): 25 -> 12 Newton iterations at h_contact = 0.02 (condensed: 12), 41 -> 9 on P2 at
+        the first step from rest): 25 -> 12 Newton iterations at h_contact = 0.02 (condensed: 12), 41 -> 10 on P2 at
         0.04 (condensed: 8). (u_C, phi, f) there; ``u_C`` in place."""
         op, d = self.op, f - phi
         S_d = self.schur.apply(d)
