@@ -264,7 +264,7 @@ class CoupledNewton:
     ``linear_iterations`` counts the inner iterations (one back-substitution each).
 
     Where the Jacobian acts on the normal dofs alone (a normal compliance, no glue) and ``halfspace`` is given (a
-    :class:`~workbench.schemes.coupled_contact.HalfSpace` over the contact dofs, 3D), the direction is found in the
+    :class:`~workbench.schemes.halfspace.HalfSpace` over the contact dofs, 3D), the direction is found in the
     springs' forces t = J s on the dofs R where J is not 0 (Woodbury):
 
         (J_RR^-1 + S0_RR) t = (S0 b)_R,      s = S0 (b - t),      s~ = b - t,
@@ -418,8 +418,8 @@ class CoupledNewton:
         dense, J sparse), kept while R and J_RR stay (the last Newton steps, the springs settled)."""
         key = (R.tobytes(), J.indices.tobytes(), J.data.tobytes())
         if key != self._key:
-            G = self.halfspace.compliance(R)
-            G *= np.median(1.0 / (self.schur.stiffness[R] * np.diag(G)))  # (the scale of S0's diagonal estimate)
+            G = self.halfspace.block(R)
+            G *= self.halfspace.scale(R, 1.0 / self.schur.stiffness[R])  # (the scale of S0's diagonal estimate)
             G = J @ G
             G[np.diag_indices_from(G)] += 1.0
             self._key, self._factor = key, la.lu_factor(G, check_finite=False)

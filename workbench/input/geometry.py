@@ -132,8 +132,12 @@ class Geometry:
     #: Whether the contact boundary may be curved: the initial gap to the foundation then varies along it.
     curved = False
     #: Whether a contact vertex is held in the normal direction where the contact holds it anyway (its contact
-    #: force is the support's reaction; :class:`HalfDisc`).
+    #: force is the support's reaction; :class:`HalfDisc`): the origin, the indenters' apex.
     pins_contact = False
+    #: The axes a of the planes x_a = 0 across which the modelled body is half of a symmetric one (rollers there):
+    #: the half-space model of the contact compliance loads each point's mirror images too
+    #: (:class:`~workbench.schemes.halfspace.HalfSpace`).
+    mirror_axes: tuple = ()
 
     def gap0(self, xyz):
         """The initial gap to the foundation at boundary points ``xyz`` (point, axis): the distance along the
@@ -422,6 +426,11 @@ class _Indenter(Geometry):
 
     extent_names, cell_names = ("radius",), ()
     curved, pins_contact, remeshable = True, True, True
+
+    @property
+    def mirror_axes(self) -> tuple:
+        """The symmetry planes through the apex, one per axis along the contact side."""
+        return self.facet_axes
 
     def __init__(self, h, cells=(), radius=1.0, h_contact=0.0, contact_zone=None):
         super().__init__(h, cells, radius=radius)

@@ -37,12 +37,13 @@ Examples
 from __future__ import annotations
 
 import numpy as np
-import scipy.linalg as la
 
-from ..discrete import solvers
 from ..errors import NewtonFailed
 from ..input.numerics import COUPLED_FROM_SCHUR
-from ..physics.unilateral import COMPLIANT, RIGID, SEPARATED, STUCK
+from ..physics.unilateral import RIGID, SEPARATED, STUCK
+from .halfspace import HalfSpace, ZonePrediction, dense_points, state_system
+
+__all__ = ["CoupledActiveSet", "HalfSpace", "KrylovMemory", "condensed_up_to", "dense_points"]
 
 
 class CoupledActiveSet:
@@ -53,6 +54,9 @@ class CoupledActiveSet:
     #: Relative residual of the state's system while the states change, and once they have settled.
     loose, tight = 1e-2, 1e-11
     max_iterations = 60
+    #: Whether each step starts from the states and forces the half-space model predicts (3D contact vertices:
+    #: :class:`~workbench.schemes.halfspace.ZonePrediction`).
+    predict = True
     #: The prediction's scale rho, tried in turn should the states cycle (a cycle is a property of the prediction,
     #: not of the problem: measured on the hemisphere at h_contact = 0.01, one node flipping at rho, none at rho / 100).
     rho_scales = (1.0, 0.01, 100.0)
@@ -62,10 +66,12 @@ class CoupledActiveSet:
         self.linear_iterations = 0
         self.memory = KrylovMemory()
         x = nodes.positions()
-        self.halfspace = None
+        self.halfspace = self.prediction = None
         if x.shape[1] == 3 and nodes.B is None:  # (3D contact vertices; the ``method`` and ``ndof`` of K: its cost)
             largest = HalfSpace.largest_for(nodes.d.ndof if ndof is None else ndof, method)
-            self.halfspace = HalfSpace(x, nodes.w, largest)
+            self.halfspace = HalfSpace.of_body(x, nodes.w, nodes.d.geometry, largest)
+            self.prediction = ZonePrediction(self.halfspace, nodes.layer) if self.predict else None
+        self._missed = 0  # (predictions that did not settle, running)
 
     def solve(self, schur, rho, s_free: np.ndarray, time: float, fallback, u=None):
         """(s, lam, iterations) as :meth:`ContactNodes.solve` (``u`` as there); ``fallback()`` returns the condensed
@@ -85,6 +91,13 @@ class CoupledActiveSet:
         """((s, lam, iterations) or None when the states cycle under exact solves, iterations so far)."""
         nodes, layer = self.nodes, self.nodes.layer
         states, lam = nodes.states.copy(), nodes.lam.copy()
+        if self.prediction is not None:
+            found = self.prediction(s_free - self.memory.product(schur, lam), lam, rho, 1.0 / schur.stiffness)
+            if found is not None and not np.array_equal(found[0], states):
+                states, lam = found  # (the same states: the last forces are the better start, their product kept)
+            self._missed = 0 if found is not None else self._missed + 1
+            if self._missed == 2:  # (twice running: the half-space does not model this body; measured: memory_block)
+                self.prediction = None
         tol, seen, exact = self.loose, set(), False
         for total in range(total + 1, total + self.max_iterations + 1):
             lam, S_lam = self._linear(schur, s_free, states, lam, tol, time)
@@ -118,17 +131,8 @@ class CoupledActiveSet:
     def _linear(self, schur, s_free, states, lam, tol, time):
         """The forces for fixed ``states`` (module docs) by preconditioned conjugate gradients from ``lam``; returns
         (lam, S lam), S lam kept up to date alongside (no extra back-substitution)."""
-        layer, w = self.nodes.layer, self.nodes.w
-        comp = states == COMPLIANT
-        fixed = (states == STUCK) | (states == RIGID)
-        unknown = fixed | comp if layer.c > 0 else fixed
-        b = s_free - np.where(states == RIGID, layer.g, 0.0)
-        D = np.zeros(len(w))
-        if layer.c > 0:
-            b = np.where(comp, s_free + layer.F / layer.c, b)
-            D[comp] = 1.0 / (w[comp] * layer.c)
-        x = np.where(unknown, lam, 0.0)
-        x[comp & ~unknown] = w[comp & ~unknown] * layer.F  # (c = 0: the layer's force is F alone)
+        unknown, b, D, x = state_system(self.nodes.layer, self.nodes.w, states, s_free)
+        x[unknown] = lam[unknown]
         S_x = self.memory.product(schur, x)
         U = np.nonzero(unknown)[0]
         if U.size == 0:
@@ -196,94 +200,6 @@ class CoupledActiveSet:
         raise NewtonFailed(f"the coupled contact solve (conjugate gradients on {U.size} contact points) did not reach "
                            f"its tolerance in {limit} iterations at t = {time:.6g} s (residual {residual:.2g} x the "
                            "tolerance); try contact_solver = 'condensed'", time=time)
-
-
-class HalfSpace:
-    """A preconditioner for the systems S_UU + diag(D) on 3D contact points: the compliance of an elastic half-space
-    between them (Boussinesq: a normal point force F at distance r lowers the surface by F (1 - nu^2) / (pi E r); a
-    point's own, its share w of the surface loaded evenly as a disc, 2 (1 - nu^2) / (pi E a) with pi a^2 = w), scaled
-    so that its diagonal matches S's estimate 1 / K_ii at the median, and factored densely for each set U.
-
-    S = B K^-1 B^T is the body's compliance at the contact points; near a contact zone small against the body (Hertz's
-    own assumption) the half-space's is a close approximation of all of it, the part a diagonal preconditioner misses
-    being the long-range coupling that makes S dense. Measured on the Hertz hemisphere from rest to the full load in
-    4 steps: 251 -> 162 back-substitutions at 47k dofs (208 -> 117 conjugate gradient iterations), 203 -> 132 at 12k.
-    Its cost is that of the dense factor, m^3 / 3 for m points (0.09 s at 2000 points, one thread, about 3
-    back-substitutions at 47k dofs, plus as much again to form it): past ``largest`` points (:meth:`largest_for`)
-    the diagonal is kept.
-
-    >>> x = np.array([[0.0, 0.0, 0.0], [1.0, 0.0, 0.0]])
-    >>> G = HalfSpace(x, np.full(2, np.pi)).compliance(np.arange(2))  # discs of radius 1, 1 apart
-    >>> (G * np.pi).round(6).tolist()  # own: 2 / a; the other's: 1 / r
-    [[2.0, 1.0], [1.0, 2.0]]
-    """
-
-    #: The range of :meth:`largest_for` (the most points factored): never fewer than the first, nor more than the
-    #: second (a matrix of 200 MB).
-    bounds = (2000, 5000)
-
-    def __init__(self, positions: np.ndarray, w: np.ndarray, largest: int = 2000):
-        self.x, self.w, self.largest = np.asarray(positions, dtype=float), np.asarray(w, dtype=float), largest
-        self._key, self._factor = None, None
-
-    @classmethod
-    def largest_for(cls, ndof: int, method: str) -> int:
-        """The most points worth a dense factor beside K's (``method``: the step's solver, ``ndof`` its dofs): as
-        many as cost two back-substitutions (:func:`dense_points`), within :attr:`bounds`. Measured on the
-        hemisphere at 193k dofs (4700 points in contact at the end): 3760 points, 274 back-substitutions and 78.6 s,
-        against 355 and 79.6 s with 2000.
-
-        >>> [HalfSpace.largest_for(n, "sparsecholesky") for n in (12_000, 46_938, 193_464, 500_000)]
-        [2000, 2473, 4640, 5000]
-        """
-        return int(np.clip(dense_points(ndof, method, 2.0), *cls.bounds))
-
-    def compliance(self, U: np.ndarray) -> np.ndarray:
-        """The half-space's compliance between the points U (in units of (1 - nu^2) / E), dense."""
-        x = self.x[U]
-        sq = np.einsum("ij,ij->i", x, x)
-        G = x @ x.T  # (|x_i - x_j|^2 from the Gram matrix: no m x m x 3 temporary)
-        G *= -2.0
-        G += sq[:, None]
-        G += sq[None, :]
-        a = np.sqrt(self.w[U] / np.pi)
-        # (no two points nearer than the smallest disc's radius, which a fair mesh never has: the point force's
-        # formula no longer holds there, and coincident points would divide by 0)
-        np.maximum(G, a.min() ** 2, out=G)
-        np.sqrt(G, out=G)
-        np.divide(1.0 / np.pi, G, out=G)
-        np.fill_diagonal(G, 2.0 / (np.pi * a))
-        return G
-
-    def preconditioner(self, U: np.ndarray, D: np.ndarray, diagonal: np.ndarray):
-        """r -> (c G_UU + diag(D))^-1 r, c matching c G_ii to 1 / ``diagonal`` - D at the median; None for fewer than
-        2 or more than :attr:`largest` points (or should the factor fail). The last factor is kept for the same U, D."""
-        if not 2 <= U.size <= self.largest:
-            return None
-        key = (U.tobytes(), D.tobytes())
-        if key != self._key:
-            G = self.compliance(U)
-            G *= np.median((1.0 / diagonal - D) / np.diag(G))
-            G[np.diag_indices_from(G)] += D
-            try:
-                self._key, self._factor = key, la.cho_factor(G, check_finite=False)
-            except la.LinAlgError:
-                self._key, self._factor = key, None
-        factor = self._factor
-        return None if factor is None else (lambda r: la.cho_solve(factor, r, check_finite=False))
-
-
-def dense_points(ndof: int, method: str, backsubs: float) -> int:
-    """The number of points m whose dense Cholesky factor costs as much as ``backsubs`` back-substitutions through
-    the sparse factor of K (``method``, ``ndof`` dofs, 3D): m^3 / 3 flops at about 30 GFlop/s on one core against
-    16 bytes read per nonzero of the factor (:func:`~workbench.discrete.solvers.sparse_factor_bytes`) at about
-    10 GB/s, so m^3 = 144 backsubs nnz.
-
-    >>> dense_points(46_938, "sparsecholesky", 2.0)
-    2473
-    """
-    nnz = solvers.sparse_factor_bytes(3, ndof, method) / 8.0
-    return int(round((144.0 * backsubs * nnz) ** (1.0 / 3.0)))
 
 
 def condensed_up_to(ndof: int, method: str) -> int:

@@ -43,7 +43,7 @@ from ..discrete import solvers
 from ..discrete.condensation import CondensedNewton, CondensedSystem, ContactOperator, CoupledNewton, SchurOperator
 from ..physics.ops import NP
 from .base import ErrorControlled
-from .coupled_contact import HalfSpace
+from .halfspace import HalfSpace
 from .model_a import KelvinVoigtScheme, kink_event
 
 
@@ -150,7 +150,8 @@ class ImplicitEuler(ErrorControlled, KelvinVoigtScheme):
         if self.coupled:
             halfspace = None
             if view.dim == 3 and not self.op.tangential:
-                halfspace = HalfSpace(*self.op.dof_points(), HalfSpace.largest_for(view.ndof, self.method))
+                halfspace = HalfSpace.of_body(*self.op.dof_points(), self.op.d.geometry,
+                                              HalfSpace.largest_for(view.ndof, self.method))
             return CoupledNewton(SchurOperator(proxy, view.ndof, self.op.C, diagonal=diagonal), self.op,
                                  halfspace=halfspace)
         return CondensedNewton(CondensedSystem(proxy, view.ndof, self.op.C), self.op)
