@@ -9,9 +9,9 @@ makes the mesh (netgen's meshing is cached on disk after the first time and is n
 the hemisphere's K twice with NGSolve (the faster kept), then times ``workbench.run``. Per level: dofs, the solvers
 taken, back-substitutions and conjugate gradient iterations, the assembly of K, the factorization, the run, their
 ratio, and the process's peak memory. Writes ``hertz_ratio.csv`` (about 6 minutes at the default levels; the last,
-193k dofs, takes 4 of them and 3 GB). ``--compare``: each level also without the half-space preconditioner of the
-coupled contact solver (``HalfSpace.bounds = (0, 0)``: the diagonal one), in the same run (``preconditioner``
-column).
+193k dofs, takes 4 of them and 3 GB). ``--compare``: each level also without the zone predicted on the half-space
+model (``CoupledActiveSet.predict = False``: the half-space preconditioner alone) and without the half-space at all
+(``HalfSpace.bounds = (0, 0)``: the diagonal preconditioner), in the same run (``preconditioner`` column).
 """
 from __future__ import annotations
 
@@ -29,10 +29,11 @@ sys.path.insert(0, "studies")
 from threadpoolctl import threadpool_limits
 import workbench
 from workbench.discrete import discretisation, solvers
-from workbench.schemes.coupled_contact import HalfSpace
+from workbench.schemes.coupled_contact import CoupledActiveSet, HalfSpace
 hc, preconditioner = float(sys.argv[1]), sys.argv[2]
 if preconditioner == "diagonal":
     HalfSpace.bounds = (0, 0)
+CoupledActiveSet.predict = preconditioner == "half-space, predicted"
 with threadpool_limits(1):
     times = []
     for _ in range(2):
@@ -73,7 +74,8 @@ def main():
     args = p.parse_args()
     rows = []
     for hc in args.levels:
-        for preconditioner in ("half-space", "diagonal") if args.compare else ("half-space",):
+        variants = ("half-space, predicted", "half-space", "diagonal")
+        for preconditioner in variants if args.compare else variants[:1]:
             rows.append(one(hc, preconditioner))
             print(rows[-1], flush=True)
     out = Path(args.out)

@@ -115,8 +115,9 @@ def test_model_a_stiff_compliance_takes_about_the_condensed_newton_steps():
 
 def test_the_half_space_preconditions_model_a_stiff_springs(monkeypatch):
     """The same run with the directions in the springs' forces, preconditioned by the half-space, against those of
-    the system in s preconditioned by S0 (``HalfSpace.bounds = (0, 0)``: no dof factored): measured 313 against
-    648 inner iterations (back-substitutions), the same solution."""
+    the system in s preconditioned by S0 (``HalfSpace.bounds = (0, 0)``: no dof factored): measured 264 against
+    648 inner iterations (back-substitutions), the same solution (313 before the half-space had the quarter's mirror
+    images and the held apex)."""
     from workbench.schemes.coupled_contact import HalfSpace
 
     with_it = workbench.run("hertz3d", contact_solver="coupled", progress=False, **STIFF_3D)
@@ -250,17 +251,18 @@ def test_the_half_space_compliance_stays_finite_for_coincident_points():
 
 
 def test_the_half_space_preconditioner_cuts_the_back_substitutions(monkeypatch):
-    """The hemisphere at h_contact = 0.01 from rest to the full load: with the half-space preconditioner the same
-    pressures (to the solver's tolerance) for far fewer back-substitutions (measured: 132 against 203, the conjugate
-    gradient iterations 100 against 169)."""
+    """The hemisphere at h_contact = 0.01 from rest to the full load, no zone predicted: with the half-space
+    preconditioner the same pressures (to the solver's tolerance) for far fewer back-substitutions (measured: 113
+    against 202, the conjugate gradient iterations 81 against 168; 132 and 100 with the plain half-space)."""
     from workbench.schemes.coupled_contact import HalfSpace
 
+    monkeypatch.setattr(CoupledActiveSet, "predict", False)
     with_it = workbench.run("memory_hertz3d", h_contact=0.01, contact_solver="coupled", progress=False)
     monkeypatch.setattr(HalfSpace, "bounds", (0, 0))  # (no set of points factored)
     without = workbench.run("memory_hertz3d", h_contact=0.01, contact_solver="coupled", progress=False)
     p, q = with_it.contact_pressure, without.contact_pressure
     assert float(np.nanmax(np.abs(p - q))) <= 1e-7 * float(np.nanmax(np.abs(q)))
-    assert int(with_it.linear_solves.sum()) < 0.75 * int(without.linear_solves.sum())
+    assert int(with_it.linear_solves.sum()) < 0.65 * int(without.linear_solves.sum())
 
 
 def test_remembered_directions_cut_the_iterations(monkeypatch):
