@@ -71,7 +71,6 @@ class CoupledActiveSet:
             largest = HalfSpace.largest_for(nodes.d.ndof if ndof is None else ndof, method)
             self.halfspace = HalfSpace.of_body(x, nodes.w, nodes.d.geometry, largest)
             self.prediction = ZonePrediction(self.halfspace, nodes.layer) if self.predict else None
-        self._missed = 0  # (predictions that did not settle, running)
 
     def solve(self, schur, rho, s_free: np.ndarray, time: float, fallback, u=None):
         """(s, lam, iterations) as :meth:`ContactNodes.solve` (``u`` as there); ``fallback()`` returns the condensed
@@ -95,9 +94,6 @@ class CoupledActiveSet:
             found = self.prediction(s_free - self.memory.product(schur, lam), lam, rho, 1.0 / schur.stiffness)
             if found is not None and not np.array_equal(found[0], states):
                 states, lam = found  # (the same states: the last forces are the better start, their product kept)
-            self._missed = 0 if found is not None else self._missed + 1
-            if self._missed == 2:  # (twice running: the half-space does not model this body; measured: memory_block)
-                self.prediction = None
         tol, seen, exact = self.loose, set(), False
         for total in range(total + 1, total + self.max_iterations + 1):
             lam, S_lam = self._linear(schur, s_free, states, lam, tol, time)
