@@ -24,8 +24,10 @@ hemisphere at 12k dofs, from rest to the full load: 152 back-substitutions in al
 solved tightly). The systems of one operator share S, so
 the last search directions are remembered with their products and each new system is deflated against them
 (:class:`KrylovMemory`: 3.8x fewer iterations over the block's 52 steps). The solution is that of the condensed
-solver to the tolerance (the discrete problem is the same). Should the states cycle, the step falls back on the
-condensed solver, whose projected Gauss-Seidel converges from anywhere.
+solver to the tolerance (the discrete problem is the same). On 3D contact vertices each step first solves its
+problem on the half-space's model of S, and the active set starts from the zone that predicts
+(:class:`~workbench.schemes.halfspace.ZonePrediction`: at 47k dofs 154 -> 79 back-substitutions). Should the states
+cycle, the step falls back on the condensed solver, whose projected Gauss-Seidel converges from anywhere.
 
 Examples
 --------
