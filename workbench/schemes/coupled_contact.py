@@ -94,8 +94,8 @@ class CoupledActiveSet:
         states, lam = nodes.states.copy(), nodes.lam.copy()
         if self.prediction is not None:
             found = self.prediction(s_free - self.memory.product(schur, lam), lam, rho, 1.0 / schur.stiffness)
-            if found is not None and not np.array_equal(found[0], states):
-                states, lam = found  # (the same states: the last forces are the better start, their product kept)
+            if found is not None:
+                states, lam = self._start(states, lam, *found)
         tol, seen, exact = self.loose, set(), False
         for total in range(total + 1, total + self.max_iterations + 1):
             lam, S_lam = self._linear(schur, s_free, states, lam, tol, time)
@@ -116,6 +116,24 @@ class CoupledActiveSet:
             tol = self.tight if exact else self.loose
             states = new
         return None, total
+
+    #: The prediction's forces start the points it adds to the zone only where it adds at least this many points,
+    #: and more than this share of the zone (:meth:`_start`).
+    added_from = (10, 0.1)
+
+    def _start(self, states, lam, predicted, forces):
+        """The active set's start from the prediction: its states, and the last forces where the zone stays. The
+        last forces are exact there, and while the zone only gains a few points the conjugate gradients find those
+        in an iteration or two from 0, with the last forces' product kept (no back-substitution); where it gains
+        many (a large load step) the model's forces start them. Measured (back-substitutions; the model's forces
+        everywhere, the last ones everywhere, this): hemisphere from rest at 47k dofs 79, 99, 76; at 12k 71, 78,
+        74; with error control and memory (353 steps at h_contact = 0.02) 985, 791, 904 (799 without the
+        prediction); loaded and unloaded in 8 steps 159, 153, 154 (150)."""
+        added = np.count_nonzero((predicted != SEPARATED) & (states == SEPARATED))
+        least, share = self.added_from
+        if added >= least and added > share * np.count_nonzero(states != SEPARATED):
+            lam = np.where(lam != 0, lam, forces)
+        return predicted, lam
 
     def _finish(self, states, s, lam, iterations):
         layer, nodes = self.nodes.layer, self.nodes
