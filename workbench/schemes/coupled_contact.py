@@ -26,7 +26,7 @@ the last search directions are remembered with their products and each new syste
 (:class:`KrylovMemory`: 3.8x fewer iterations over the block's 52 steps). The solution is that of the condensed
 solver to the tolerance (the discrete problem is the same). On 3D contact vertices each step first solves its
 problem on the half-space's model of S, and the active set starts from the zone that predicts
-(:class:`~workbench.schemes.halfspace.ZonePrediction`: at 47k dofs 154 -> 79 back-substitutions). Should the states
+(:class:`~workbench.schemes.halfspace.ZonePrediction`: at 47k dofs 154 -> 76 back-substitutions). Should the states
 cycle, the step falls back on the condensed solver, whose projected Gauss-Seidel converges from anywhere.
 
 Examples
