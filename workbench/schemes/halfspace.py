@@ -204,14 +204,16 @@ def state_system(layer, w: np.ndarray, states: np.ndarray, b: np.ndarray):
 class ZonePrediction:
     """A step's contact problem solved on the half-space model M = c G~ of S (:class:`HalfSpace`), from the last
     forces lam0: S lam ~ S lam0 + M (lam - lam0). No back-substitution; dense factors of the model's active sets.
-    The coupled active set starts from its states and forces, and its own iterations then only correct the zone's
-    rim. Measured on the hemisphere at h_contact = 0.01, the model's zone against the true one at the four load
+    The coupled active set starts from its states (and, where a step adds many points, its forces there:
+    :meth:`~workbench.schemes.coupled_contact.CoupledActiveSet._start`), and its own iterations then only correct
+    the zone's rim. Measured on the hemisphere at h_contact = 0.01, the model's zone against the true one at the four load
     steps: 6, 6, 2, 6 points wrong of 115-287 (the exact active set then took 3, 3, 2, 3 iterations from it,
     against 14, 6, 4, 6 from the last step's states).
 
     Above :attr:`HalfSpace.largest` points the problem is first solved on clusters of points (a grid of cells,
     about :attr:`clusters` of them; their forces summed, displacements averaged), and then on the points of the
-    clusters in contact and their neighbours.
+    clusters in contact and their neighbours. A zone larger than :attr:`HalfSpace.largest` is not predicted; a model
+    whose active set cycles twice running is dropped for the run.
     """
 
     max_iterations = 30
