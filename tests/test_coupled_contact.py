@@ -245,7 +245,7 @@ def test_the_half_space_compliance_stays_finite_for_coincident_points():
     with warnings.catch_warnings():
         warnings.simplefilter("error")
         G = half.compliance(np.arange(3))
-        apply = half.preconditioner(np.arange(3), np.zeros(3), np.ones(3))
+        apply = half.preconditioner(np.arange(3), np.zeros(3), 1.0)
     assert np.all(np.isfinite(G))
     assert apply is None or np.all(np.isfinite(apply(np.ones(3))))
 

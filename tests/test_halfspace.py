@@ -155,3 +155,38 @@ def test_the_start_keeps_the_last_forces_where_the_zone_stays():
     assert np.all(start(40, 60) == 2.0)  # 20 added to 40
     assert np.all(start(200, 212) == 0.0)  # 12 added to 200: 6 %
     assert np.all(start(0, 35) == 2.0)  # from rest
+
+
+def test_the_models_factor_is_updated_exactly():
+    """ModelFactor: a set of points that loses and gains a few points (and changes a few D) a call is solved through
+    the base factor by low-rank corrections, to round-off against a dense solve of its own matrix, with a new base
+    factor only once the changes pass ``rebase`` of the set."""
+    from workbench.schemes.halfspace import ModelFactor
+
+    rng = np.random.default_rng(3)
+    x = np.c_[rng.random((300, 2)), np.zeros(300)]
+    half = HalfSpace(x, np.full(300, 1e-3), mirrors=(0, 1), held=np.zeros(3))
+    factors, c = ModelFactor(half), 2.5
+    U, D = np.sort(rng.choice(300, 150, replace=False)), np.zeros(150)
+    for _ in range(20):
+        U2 = np.union1d(np.delete(U, rng.choice(U.size, 1)), rng.choice(np.setdiff1d(np.arange(300), U), 2))
+        D2 = np.where(np.isin(U2, U), np.interp(U2, U, D), 0.0)
+        D2[rng.choice(U2.size, 1)] = rng.random()  # (a compliant point's layer)
+        A = c * half.compliance(U2) + np.diag(D2)
+        r = rng.random((U2.size, 2))
+        assert np.abs(A @ factors(U2, D2, c)(r) - r).max() <= 1e-10 * np.abs(r).max()
+        U, D = U2, D2
+    assert 2 <= factors.factorizations <= 6  # (4 changes a call against 0.125 x 150: a new base every 4-5 calls)
+
+
+def test_updated_factors_find_what_fresh_factors_find(monkeypatch):
+    """The hemisphere at h_contact = 0.02 with the model's factors updated (the default) and redone for every set
+    (``rebase = 0``): the same pressures and, but for round-off in the conjugate gradients, the same
+    back-substitutions."""
+    from workbench.schemes.halfspace import ModelFactor
+
+    updated = _run(h_contact=0.02)
+    monkeypatch.setattr(ModelFactor, "rebase", 0.0)
+    fresh = _run(h_contact=0.02)
+    _same_pressures(updated, fresh, 1e-9)
+    assert abs(int(updated.linear_solves.sum()) - int(fresh.linear_solves.sum())) <= 2

@@ -62,6 +62,10 @@ class CoupledActiveSet:
     #: The prediction's scale rho, tried in turn should the states cycle (a cycle is a property of the prediction,
     #: not of the problem: measured on the hemisphere at h_contact = 0.01, one node flipping at rho, none at rho / 100).
     rho_scales = (1.0, 0.01, 100.0)
+    #: The most contact points the half-space model factors densely: as many as cost this many back-substitutions
+    #: (:meth:`HalfSpace.largest_for`). Its factor is updated from one active set to the next, not redone
+    #: (:class:`~workbench.schemes.halfspace.ModelFactor`), so a step pays about one or two.
+    model_backsubs = 8.0
 
     def __init__(self, nodes, method: str = "auto", ndof: int | None = None):
         self.nodes = nodes
@@ -70,7 +74,7 @@ class CoupledActiveSet:
         x = nodes.positions()
         self.halfspace = self.prediction = None
         if x.shape[1] == 3 and nodes.B is None:  # (3D contact vertices; the ``method`` and ``ndof`` of K: its cost)
-            largest = HalfSpace.largest_for(nodes.d.ndof if ndof is None else ndof, method)
+            largest = HalfSpace.largest_for(nodes.d.ndof if ndof is None else ndof, method, self.model_backsubs)
             self.halfspace = HalfSpace.of_body(x, nodes.w, nodes.d.geometry, largest)
             self.prediction = ZonePrediction(self.halfspace, nodes.layer) if self.predict else None
 
@@ -177,8 +181,11 @@ class CoupledActiveSet:
         if np.abs(r).max() <= tol and np.abs(b - S_x[U] - D * x[U]).max() <= tol:
             return x, S_x  # (solved already: no preconditioner to build)
         diagonal = 1.0 / (1.0 / schur.stiffness[U] + D)
-        precondition = (self.halfspace.preconditioner(U, D, diagonal) if self.halfspace is not None else None) or \
-            (lambda r: diagonal * r)
+        precondition = None
+        if self.halfspace is not None:  # (the model's scale as the prediction's: their factors are shared)
+            c = self.halfspace.scale(np.arange(w), 1.0 / schur.stiffness)
+            precondition = self.halfspace.preconditioner(U, D, c)
+        precondition = precondition or (lambda r: diagonal * r)
         limit = max(200, 2 * U.size)
         for _ in range(2):
             z = precondition(r)

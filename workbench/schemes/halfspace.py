@@ -63,8 +63,8 @@ class HalfSpace:
     """
 
     #: The range of :meth:`largest_for` (the most points factored): never fewer than the first, nor more than the
-    #: second (a matrix of 200 MB).
-    bounds = (2000, 5000)
+    #: second (a matrix of 290 MB).
+    bounds = (2000, 6000)
 
     def __init__(self, positions: np.ndarray, w: np.ndarray, largest: int = 2000, mirrors: tuple = (),
                  held=None):
@@ -82,7 +82,8 @@ class HalfSpace:
             p = np.asarray(held, dtype=float)[None, :]
             near = np.argsort(np.linalg.norm(self.x - p, axis=1))[:6]  # (its patch: as large as its neighbours')
             self.held = (self._kernel(self.x, p)[:, 0], float(self._own(p, np.median(self.w[near]))[0]))
-        self._key, self._factor, self._block = None, None, (np.zeros(0, dtype=int), np.zeros((0, 0)))
+        self._block = (np.zeros(0, dtype=int), np.zeros((0, 0)))
+        self.factors = ModelFactor(self)
 
     @classmethod
     def of_body(cls, positions, w, geometry, largest: int = 2000) -> "HalfSpace":
@@ -92,16 +93,17 @@ class HalfSpace:
         return cls(positions, w, largest, mirrors=geometry.mirror_axes, held=held)
 
     @classmethod
-    def largest_for(cls, ndof: int, method: str) -> int:
+    def largest_for(cls, ndof: int, method: str, backsubs: float = 2.0) -> int:
         """The most points worth a dense factor beside K's (``method``: the step's solver, ``ndof`` its dofs): as
-        many as cost two back-substitutions (:func:`dense_points`), within :attr:`bounds`. Measured on the
+        many as cost ``backsubs`` back-substitutions (:func:`dense_points`), within :attr:`bounds`. Measured on the
         hemisphere at 193k dofs (4700 points in contact at the end): 3760 points, 274 back-substitutions and 78.6 s,
-        against 355 and 79.6 s with 2000.
+        against 355 and 79.6 s with 2000 (a factor for each active set; Model B's solver now updates its factors
+        and affords more: :attr:`~workbench.schemes.coupled_contact.CoupledActiveSet.model_backsubs`).
 
         >>> [HalfSpace.largest_for(n, "sparsecholesky") for n in (12_000, 46_938, 193_464, 500_000)]
-        [2000, 2473, 4640, 5000]
+        [2000, 2473, 4640, 6000]
         """
-        return int(np.clip(dense_points(ndof, method, 2.0), *cls.bounds))
+        return int(np.clip(dense_points(ndof, method, backsubs), *cls.bounds))
 
     def _kernel(self, x, y) -> np.ndarray:
         """sum over the images y' of the points y of 1 / (pi |x - y'|), (len(x), len(y))."""
@@ -131,49 +133,165 @@ class HalfSpace:
 
     def compliance(self, U: np.ndarray) -> np.ndarray:
         """The half-space's compliance between the points U (images and held point included), dense."""
-        x = self.x[U]
-        G = self._kernel(x, x)
-        np.fill_diagonal(G, self.own[U])
+        return self._between(U, U)
+
+    def _between(self, P: np.ndarray, Q: np.ndarray) -> np.ndarray:
+        G = self._kernel(self.x[P], self.x[Q])
+        same = np.nonzero(P[:, None] == Q[None, :]) if P is not Q else (np.arange(P.size),) * 2
+        G[same] = self.own[P[same[0]]]
         if self.held is not None:
             g, own = self.held
-            G -= g[U][:, None]
-            G -= g[U][None, :]
+            G -= g[P][:, None]
+            G -= g[Q][None, :]
             G += own
         return G
 
+    def between(self, P: np.ndarray, Q: np.ndarray) -> np.ndarray:
+        """The compliance between the points P (rows) and Q (columns): cut from the last block where that holds
+        both, else computed (the last block kept)."""
+        last, G = self._block
+        at = [np.searchsorted(last, V) for V in (P, Q)]
+        if last.size and all(np.array_equal(last[np.minimum(a, last.size - 1)], V) for a, V in zip(at, (P, Q))):
+            return G[np.ix_(*at)]
+        return self._between(P, Q)
+
     def block(self, U: np.ndarray) -> np.ndarray:
         """:meth:`compliance` of U (a copy), cut from the last block computed when that holds U (the active set's
-        systems and the prediction's work on subsets of one set of points)."""
+        systems and the prediction's work on subsets of one set of points), and where it holds most of U only the
+        new points' rows computed (the next step's points: measured on the hemisphere at 193k dofs, the kernel's
+        evaluations over the run 4.1 s -> 1.1 s)."""
         last, G = self._block
-        where = np.searchsorted(last, U)
-        if last.size and np.all(where < last.size) and np.array_equal(last[np.minimum(where, last.size - 1)], U):
+        where = np.minimum(np.searchsorted(last, U), max(last.size - 1, 0))
+        held = (last[where] == U) if last.size else np.zeros(U.size, dtype=bool)
+        if held.all():
             return G[np.ix_(where, where)]
-        G = self.compliance(U)
-        self._block = (np.array(U), G)
-        return G.copy()
+        if np.count_nonzero(held) > 0.5 * U.size:
+            old, new = np.nonzero(held)[0], np.nonzero(~held)[0]
+            B = np.empty((U.size, U.size))
+            B[np.ix_(old, old)] = G[np.ix_(where[old], where[old])]
+            B[new] = self._between(U[new], U)
+            B[:, new] = B[new].T
+        else:
+            B = self.compliance(U)
+        self._block = (np.array(U), B)
+        return B.copy()
 
     def scale(self, U: np.ndarray, local: np.ndarray) -> float:
         """c matching c G_ii to ``local`` (S's diagonal estimate 1 / K_ii on the points U) at the median."""
         return float(np.median(local / self.own[U]))
 
-    def preconditioner(self, U: np.ndarray, D: np.ndarray, diagonal: np.ndarray):
-        """r -> (c G_UU + diag(D))^-1 r (``diagonal``: 1 / (1 / K_ii + D), the diagonal preconditioner); None for
-        fewer than 2 or more than :attr:`largest` points (or should the factor fail). The last factor is kept for the
-        same U, D."""
+    def preconditioner(self, U: np.ndarray, D: np.ndarray, c: float):
+        """r -> (c G_UU + diag(D))^-1 r (``c``: :meth:`scale`); None for fewer than 2 or more than :attr:`largest`
+        points, or should the matrix not be positive definite. Its factor is updated, not redone, while U and D
+        change by a few points (:class:`ModelFactor`)."""
         if not 2 <= U.size <= self.largest:
             return None
-        key = (U.tobytes(), D.tobytes())
-        if key != self._key:
-            G = self.block(U)
-            G *= self.scale(U, 1.0 / diagonal - D)
-            G[np.diag_indices_from(G)] += D
-            try:
-                self._key, self._factor = key, la.cho_factor(G, check_finite=False)
-            except la.LinAlgError:
-                self._key, self._factor = key, None
-        factor = self._factor
-        return None if factor is None else (lambda r: la.cho_solve(factor, r, check_finite=False))
+        try:
+            return self.factors(U, D, c)
+        except la.LinAlgError:
+            return None
 
+
+class ModelFactor:
+    """Solves with the model's matrix A_U = c G_UU + diag(D_U) of a :class:`HalfSpace` for sets of points U that
+    change by a few points from one call to the next (the active set's iterations and steps), exactly, with one dense
+    Cholesky factor of a *base* set U0 and low-rank corrections:
+
+    * the points I of U0 kept in U (with their D): A_II^-1 y is the solve on U0 with the removed points R held at 0
+      (A_0 z = y - E mu, z_R = 0: mu from (A_0^-1)_RR, |R| solves with the base factor);
+    * the points N added (or whose D changed): the Schur complement T = A_NN - A_NI A_II^-1 A_IN, |N| x |N|.
+
+    Each solve then costs one solve with the base factor and products with |R| + |N| columns; setting up a new U
+    costs |R| + |N| solves with it, against |U|/3 for a factor, so U becomes the new base beyond :attr:`rebase` x |U|
+    points changed (or another c). ``factorizations`` counts the base factors.
+
+    >>> x = np.array([[0.0, 0.0, 0.0], [1.0, 0.0, 0.0], [0.0, 1.0, 0.0], [1.0, 1.0, 0.0]])
+    >>> half = HalfSpace(x, np.full(4, 0.1))
+    >>> factors = ModelFactor(half)
+    >>> factors.rebase = 2.0  # (so few points: always an update)
+    >>> _ = factors(np.array([0, 1, 2]), np.zeros(3), 1.0)
+    >>> U, D = np.array([1, 2, 3]), np.array([0.0, 5.0, 0.0])  # one point removed, one added, one D changed
+    >>> A = half.compliance(U) + np.diag(D)
+    >>> bool(np.allclose(A @ factors(U, D, 1.0)(np.ones(3)), 1.0)), factors.factorizations
+    (True, 1)
+    """
+
+    #: The share of changed points beyond which the set becomes the new base (measured on the hemisphere at 193k
+    #: dofs: see docs/schemes.md).
+    rebase = 0.125
+
+    def __init__(self, half: HalfSpace):
+        self.half = half
+        self.factorizations = 0
+        self._base = None  # (U0, D0, c, Cholesky factor of A_0)
+        self._last = (None, None)
+
+    def __call__(self, U: np.ndarray, D: np.ndarray, c: float):
+        """r -> A_U^-1 r (r: (|U|,) or (|U|, k)); raises LinAlgError where A_U is not positive definite."""
+        key = (U.tobytes(), D.tobytes(), c)
+        if key == self._last[0]:
+            return self._last[1]
+        solve = self._updated(U, D, c) if self._base is not None and self._base[2] == c else None
+        if solve is None:
+            A = self.half.between(U, U)
+            A *= c
+            A[np.diag_indices_from(A)] += D
+            self._base, self._last = None, (None, None)
+            factor = la.cho_factor(A, overwrite_a=True, check_finite=False)
+            self.factorizations += 1
+            self._base = (U.copy(), D.copy(), c, factor)
+            solve = self._solver(factor, np.arange(U.size), np.zeros(0, dtype=int))
+        self._last = (key, solve)
+        return solve
+
+    def _updated(self, U, D, c):
+        """The solve on U through the base factor, or None where too many points changed."""
+        U0, D0, _, factor = self._base
+        at = np.minimum(np.searchsorted(U0, U), U0.size - 1)
+        same = (U0[at] == U) & (D0[at] == D)
+        kept = np.zeros(U0.size, dtype=bool)
+        kept[at[same]] = True
+        removed, new = np.nonzero(~kept)[0], np.nonzero(~same)[0]
+        if removed.size + new.size > self.rebase * U.size:
+            return None
+        kept_at, inner = np.nonzero(same)[0], self._solver(factor, at[same], removed)
+        if new.size == 0:
+            return inner
+        A_IN = c * self.half.between(U[kept_at], U[new])
+        A_NN = c * self.half.between(U[new], U[new])
+        A_NN[np.diag_indices_from(A_NN)] += D[new]
+        W = inner(A_IN)
+        T = la.cho_factor(A_NN - A_IN.T @ W, check_finite=False)
+
+        def solve(r):
+            x = np.empty_like(r)
+            x_I = inner(r[kept_at])
+            x[new] = x_N = la.cho_solve(T, r[new] - A_IN.T @ x_I, check_finite=False)
+            x[kept_at] = x_I - W @ x_N
+            return x
+
+        return solve
+
+    @staticmethod
+    def _solver(factor, kept, removed):
+        """y -> A_II^-1 y for the base points ``kept`` (positions), the base points ``removed`` held at 0."""
+        n = factor[0].shape[0]
+        if removed.size == 0 and kept.size == n:
+            return lambda y: la.cho_solve(factor, y, check_finite=False)
+        E = np.zeros((n, removed.size))
+        E[removed, np.arange(removed.size)] = 1.0
+        Y = la.cho_solve(factor, E, check_finite=False)
+        C = la.cho_factor(Y[removed], check_finite=False) if removed.size else None
+
+        def solve(y):
+            z = np.zeros((n,) + y.shape[1:])
+            z[kept] = y
+            z = la.cho_solve(factor, z, check_finite=False)
+            if C is not None:
+                z -= Y @ la.cho_solve(C, z[removed], check_finite=False)
+            return z[kept]
+
+        return solve
 
 
 class _Cycled(Exception):
@@ -206,8 +324,8 @@ class ZonePrediction:
     forces lam0: S lam ~ S lam0 + M (lam - lam0). No back-substitution; dense factors of the model's active sets.
     The coupled active set starts from its states (and, where a step adds many points, its forces there:
     :meth:`~workbench.schemes.coupled_contact.CoupledActiveSet._start`), and its own iterations then only correct
-    the zone's rim. Measured on the hemisphere at h_contact = 0.01, the model's zone against the true one at the four load
-    steps: 6, 6, 2, 6 points wrong of 115-287 (the exact active set then took 3, 3, 2, 3 iterations from it,
+    the zone's rim. Measured on the hemisphere at h_contact = 0.01, the model's zone against the true one at the four
+    load steps: 6, 6, 2, 6 points wrong of 115-287 (the exact active set then took 3, 3, 2, 3 iterations from it,
     against 14, 6, 4, 6 from the last step's states).
 
     Above :attr:`HalfSpace.largest` points the problem is first solved on clusters of points (a grid of cells,
@@ -253,14 +371,18 @@ class ZonePrediction:
                 raise _Outgrown  # (before the model's block is formed; the clusters' zone alone is no start: measured
                 # at 193k dofs, 137 and 130 back-substitutions in the two steps it served, 120 and 81 from the last
                 # states)
-        found = self._solve(c * half.block(C), b[C], w[C], lam0[C], rho[C] if np.ndim(rho) else rho, states)
+        found = self._solve(half, C, c, (b[C], w[C], lam0[C], rho[C] if np.ndim(rho) else rho), states)
         states, lam = np.full(w.size, SEPARATED), np.zeros(w.size)
         states[C], lam[C] = found
         return states, lam
 
-    def _solve(self, M, b, w, lam0, rho, states=None):
-        """The primal-dual active set on the model, s = b - M (lam - lam0): (states, lam); raises _Cycled or
-        _Outgrown (more unknowns than a dense factor is allowed)."""
+    def _solve(self, half, C, c, problem, states=None):
+        """The primal-dual active set on the model M = c G~_CC of ``half`` (points C), s = b - M (lam - lam0), for
+        ``problem`` = (b, w, lam0, rho) on C: (states, lam); raises _Cycled or _Outgrown (more unknowns than a dense
+        factor is allowed). Its factors are updated from one active set to the next (:class:`ModelFactor`)."""
+        b, w, lam0, rho = problem
+        M = half.block(C)
+        M *= c
         layer, shifted = self.layer, b + M @ lam0  # (s = shifted - M lam)
         if states is None:
             states = layer.state_of(b + rho * lam0, rho * w)
@@ -274,13 +396,11 @@ class ZonePrediction:
             if U.size > self.half.largest:
                 raise _Outgrown
             if U.size:
-                A = M[np.ix_(U, U)]
-                A[np.diag_indices_from(A)] += D[U]
                 try:
-                    factor = la.cho_factor(A, check_finite=False)
+                    solve = half.factors(C[U], D[U], c)
                 except la.LinAlgError:
                     raise _Cycled from None  # (the model is not positive definite here: no guide either)
-                lam[U] = la.cho_solve(factor, rhs[U] - M[U] @ lam, check_finite=False)
+                lam[U] = solve(rhs[U] - M[U] @ lam if lam.any() else rhs[U])  # (lam: the forces known, mostly 0)
             new = layer.state_of(shifted - M @ lam + rho * lam, rho * w)
             if np.array_equal(new, states):
                 return states, lam
@@ -296,8 +416,7 @@ class ZonePrediction:
         # (rho: a point's displacement per force, here the mean member's over as many members as share the force)
         count = np.bincount(label, minlength=W.size)
         rho = np.bincount(label, np.broadcast_to(rho, label.shape), minlength=W.size) / count ** 2
-        states, _ = self._solve(c * half.block(np.arange(W.size)), B, W, np.bincount(label, lam0, minlength=W.size),
-                                rho)
+        states, _ = self._solve(half, np.arange(W.size), c, (B, W, np.bincount(label, lam0, minlength=W.size), rho))
         touching = states != SEPARATED
         near = {tuple(k + o) for k in keys[touching] for o in itertools.product((-1, 0, 1), repeat=keys.shape[1])}
         ring = np.array([tuple(k) in near for k in keys])
