@@ -418,8 +418,7 @@ class CoupledNewton:
         dense, J sparse), kept while R and J_RR stay (the last Newton steps, the springs settled)."""
         key = (R.tobytes(), J.indices.tobytes(), J.data.tobytes())
         if key != self._key:
-            G = self.halfspace.block(R)
-            G *= self.halfspace.scale(R, 1.0 / self.schur.stiffness[R])  # (the scale of S0's diagonal estimate)
+            G = self.halfspace.block(R, self.halfspace.scale(R, 1.0 / self.schur.stiffness[R]))  # (S0's diagonal's)
             G = J @ G
             G[np.diag_indices_from(G)] += 1.0
             self._key, self._factor = key, la.lu_factor(G, check_finite=False)

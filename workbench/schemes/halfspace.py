@@ -155,16 +155,18 @@ class HalfSpace:
             return G[np.ix_(*at)]
         return self._between(P, Q)
 
-    def block(self, U: np.ndarray) -> np.ndarray:
-        """:meth:`compliance` of U (a copy), cut from the last block computed when that holds U (the active set's
-        systems and the prediction's work on subsets of one set of points), and where it holds most of U only the
-        new points' rows computed (the next step's points: measured on the hemisphere at 193k dofs, the kernel's
-        evaluations over the run 4.1 s -> 1.1 s)."""
+    def block(self, U: np.ndarray, scale: float = 1.0) -> np.ndarray:
+        """``scale`` x :meth:`compliance` of U (a new array), cut from the last block computed when that holds U (the
+        active set's systems and the prediction's work on subsets of one set of points), and where it holds most of U
+        only the new points' rows computed (the next step's points: measured on the hemisphere at 193k dofs, the
+        kernel's evaluations over the run 4.1 s -> 1.1 s)."""
         last, G = self._block
         where = np.minimum(np.searchsorted(last, U), max(last.size - 1, 0))
         held = (last[where] == U) if last.size else np.zeros(U.size, dtype=bool)
         if held.all():
-            return G[np.ix_(where, where)]
+            B = G[np.ix_(where, where)]
+            B *= scale
+            return B
         if np.count_nonzero(held) > 0.5 * U.size:
             old, new = np.nonzero(held)[0], np.nonzero(~held)[0]
             B = np.empty((U.size, U.size))
@@ -174,7 +176,7 @@ class HalfSpace:
         else:
             B = self.compliance(U)
         self._block = (np.array(U), B)
-        return B.copy()
+        return scale * B
 
     def scale(self, U: np.ndarray, local: np.ndarray) -> float:
         """c matching c G_ii to ``local`` (S's diagonal estimate 1 / K_ii on the points U) at the median."""
@@ -195,15 +197,17 @@ class HalfSpace:
 class ModelFactor:
     """Solves with the model's matrix A_U = c G_UU + diag(D_U) of a :class:`HalfSpace` for sets of points U that
     change by a few points from one call to the next (the active set's iterations and steps), exactly, with one dense
-    Cholesky factor of a *base* set U0 and low-rank corrections:
+    Cholesky factor of a *base* set U0 and low-rank corrections. The points of U0 not in U (or whose D changed), R,
+    are held at 0 by multipliers; the points of U not in U0 (or whose D changed), N, border the base system:
 
-    * the points I of U0 kept in U (with their D): A_II^-1 y is the solve on U0 with the removed points R held at 0
-      (A_0 z = y - E mu, z_R = 0: mu from (A_0^-1)_RR, |R| solves with the base factor);
-    * the points N added (or whose D changed): the Schur complement T = A_NN - A_NI A_II^-1 A_IN, |N| x |N|.
+        A_0 x_0 + A_0N x_N + E_R mu = r_0,   A_N0 x_0 + A_NN x_N = r_N,   E_R^T x_0 = 0.
 
-    Each solve then costs one solve with the base factor and products with |R| + |N| columns; setting up a new U
-    costs |R| + |N| solves with it, against |U|/3 for a factor, so U becomes the new base beyond :attr:`rebase` x |U|
-    points changed (or another c). ``factorizations`` counts the base factors.
+    With Z_N = A_0^-1 A_0N and Y_R = A_0^-1 E_R (a column per point, computed once per base and kept while the
+    point stays changed) x_N solves T x_N = r_N - A_N0 q + Z_R^T Y_RR^-1 q_R, q = A_0^-1 r_0, where
+    T = A_NN - A_N0 Z_N + Z_R^T Y_RR^-1 Z_R is the Schur complement A_NN - A_NI A_II^-1 A_IN (Z_R: Z_N's rows R,
+    Y_RR: Y_R's). A solve costs one solve with the base factor and products with the |R| + |N| columns; a set beyond
+    :attr:`rebase` x |U| changed points (or another c) becomes the new base. ``factorizations`` counts the base
+    factors.
 
     >>> x = np.array([[0.0, 0.0, 0.0], [1.0, 0.0, 0.0], [0.0, 1.0, 0.0], [1.0, 1.0, 0.0]])
     >>> half = HalfSpace(x, np.full(4, 0.1))
@@ -218,12 +222,13 @@ class ModelFactor:
 
     #: The share of changed points beyond which the set becomes the new base (measured on the hemisphere at 193k
     #: dofs: see docs/schemes.md).
-    rebase = 0.125
+    rebase = 0.25
 
     def __init__(self, half: HalfSpace):
         self.half = half
         self.factorizations = 0
         self._base = None  # (U0, D0, c, Cholesky factor of A_0)
+        self._columns = ({}, {})  # (Y's column per removed base position, (A_0N's, Z's) per (new point, its D))
         self._last = (None, None)
 
     def __call__(self, U: np.ndarray, D: np.ndarray, c: float):
@@ -231,67 +236,86 @@ class ModelFactor:
         key = (U.tobytes(), D.tobytes(), c)
         if key == self._last[0]:
             return self._last[1]
-        solve = self._updated(U, D, c) if self._base is not None and self._base[2] == c else None
+        solve = self._updated(U, D) if self._base is not None and self._base[2] == c else None
         if solve is None:
             A = self.half.between(U, U)
             A *= c
             A[np.diag_indices_from(A)] += D
-            self._base, self._last = None, (None, None)
+            self._base, self._columns, self._last = None, ({}, {}), (None, None)
             factor = la.cho_factor(A, overwrite_a=True, check_finite=False)
             self.factorizations += 1
             self._base = (U.copy(), D.copy(), c, factor)
-            solve = self._solver(factor, np.arange(U.size), np.zeros(0, dtype=int))
+            solve = lambda r: la.cho_solve(factor, r, check_finite=False)  # noqa: E731
         self._last = (key, solve)
         return solve
 
-    def _updated(self, U, D, c):
-        """The solve on U through the base factor, or None where too many points changed."""
-        U0, D0, _, factor = self._base
+    def _updated(self, U, D):
+        """The solve on U through the base factor (class docs), or None where too many points changed."""
+        U0, D0, c, factor = self._base
         at = np.minimum(np.searchsorted(U0, U), U0.size - 1)
         same = (U0[at] == U) & (D0[at] == D)
         kept = np.zeros(U0.size, dtype=bool)
         kept[at[same]] = True
-        removed, new = np.nonzero(~kept)[0], np.nonzero(~same)[0]
-        if removed.size + new.size > self.rebase * U.size:
+        R, N = np.nonzero(~kept)[0], np.nonzero(~same)[0]
+        if R.size + N.size > self.rebase * U.size:
             return None
-        kept_at, inner = np.nonzero(same)[0], self._solver(factor, at[same], removed)
-        if new.size == 0:
-            return inner
-        A_IN = c * self.half.between(U[kept_at], U[new])
-        A_NN = c * self.half.between(U[new], U[new])
-        A_NN[np.diag_indices_from(A_NN)] += D[new]
-        W = inner(A_IN)
-        T = la.cho_factor(A_NN - A_IN.T @ W, check_finite=False)
+        kept_at, kept_U = at[same], np.nonzero(same)[0]
+        if R.size == 0 and N.size == 0:
+            return lambda r: la.cho_solve(factor, r, check_finite=False)
+        Y, (A_0N, Z) = self._border(R, U[N], D[N])
+        Y_RR = la.cho_factor(Y[R], check_finite=False) if R.size else None
+        Z_R = Z[R]
+        T = None
+        if N.size:
+            T = c * self.half.between(U[N], U[N])
+            T[np.diag_indices_from(T)] += D[N]
+            T -= A_0N.T @ Z
+            if R.size:
+                T += Z_R.T @ la.cho_solve(Y_RR, Z_R, check_finite=False)
+            T = la.cho_factor(T, check_finite=False)
 
         def solve(r):
+            q = np.zeros((U0.size,) + r.shape[1:])
+            q[kept_at] = r[kept_U]
+            q = la.cho_solve(factor, q, check_finite=False)
             x = np.empty_like(r)
-            x_I = inner(r[kept_at])
-            x[new] = x_N = la.cho_solve(T, r[new] - A_IN.T @ x_I, check_finite=False)
-            x[kept_at] = x_I - W @ x_N
+            mu = la.cho_solve(Y_RR, q[R], check_finite=False) if R.size else None
+            if N.size:
+                rhs = r[N] - A_0N.T @ q
+                if R.size:
+                    rhs += Z_R.T @ mu
+                x[N] = x_N = la.cho_solve(T, rhs, check_finite=False)
+                q -= Z @ x_N
+                if R.size:
+                    mu -= la.cho_solve(Y_RR, Z_R @ x_N, check_finite=False)
+            if R.size:
+                q -= Y @ mu
+            x[kept_U] = q[kept_at]
             return x
 
         return solve
 
-    @staticmethod
-    def _solver(factor, kept, removed):
-        """y -> A_II^-1 y for the base points ``kept`` (positions), the base points ``removed`` held at 0."""
-        n = factor[0].shape[0]
-        if removed.size == 0 and kept.size == n:
-            return lambda y: la.cho_solve(factor, y, check_finite=False)
-        E = np.zeros((n, removed.size))
-        E[removed, np.arange(removed.size)] = 1.0
-        Y = la.cho_solve(factor, E, check_finite=False)
-        C = la.cho_factor(Y[removed], check_finite=False) if removed.size else None
-
-        def solve(y):
-            z = np.zeros((n,) + y.shape[1:])
-            z[kept] = y
-            z = la.cho_solve(factor, z, check_finite=False)
-            if C is not None:
-                z -= Y @ la.cho_solve(C, z[removed], check_finite=False)
-            return z[kept]
-
-        return solve
+    def _border(self, R, points, D):
+        """(Y_R, (A_0N, Z_N)) for the removed base positions R and the new ``points`` with their D, the columns not
+        kept yet solved for at once (and kept)."""
+        U0, _, c, factor = self._base
+        removed, new = self._columns
+        missing = [i for i in R if i not in removed]
+        if missing:
+            E = np.zeros((U0.size, len(missing)))
+            E[missing, np.arange(len(missing))] = 1.0
+            for i, column in zip(missing, la.cho_solve(factor, E, check_finite=False).T):
+                removed[i] = column
+        keys = list(zip(points.tolist(), D.tolist()))
+        absent = [j for j, key in enumerate(keys) if key not in new]
+        if absent:
+            A = c * self.half.between(U0, points[absent])
+            for j, a, z in zip(absent, A.T, la.cho_solve(factor, A, check_finite=False).T):
+                new[keys[j]] = (a, z)
+        Y = np.array([removed[i] for i in R]).T if R.size else np.zeros((U0.size, 0))
+        A_0N = np.array([new[key][0] for key in keys]).T if keys else np.zeros((U0.size, 0))
+        Z = np.array([new[key][1] for key in keys]).T if keys else np.zeros((U0.size, 0))
+        return Y, (A_0N, Z)
 
 
 class _Cycled(Exception):
@@ -381,8 +405,7 @@ class ZonePrediction:
         ``problem`` = (b, w, lam0, rho) on C: (states, lam); raises _Cycled or _Outgrown (more unknowns than a dense
         factor is allowed). Its factors are updated from one active set to the next (:class:`ModelFactor`)."""
         b, w, lam0, rho = problem
-        M = half.block(C)
-        M *= c
+        M = half.block(C, c)
         layer, shifted = self.layer, b + M @ lam0  # (s = shifted - M lam)
         if states is None:
             states = layer.state_of(b + rho * lam0, rho * w)
