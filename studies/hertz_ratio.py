@@ -8,8 +8,9 @@ of the same size (NGSolve's ``sparsecholesky``, one thread). Each level is a pro
 makes the mesh (netgen's meshing is cached on disk after the first time and is not timed), assembles and factors
 the hemisphere's K twice with NGSolve (the faster kept), then times ``workbench.run``. Per level: dofs, the solvers
 taken, back-substitutions and conjugate gradient iterations, the assembly of K, the factorization, the run, their
-ratio, and the process's peak memory. Writes ``hertz_ratio.csv`` (about 6 minutes at the default levels; the last,
-193k dofs, takes 4 of them and 3 GB). ``--compare``: each level also without the zone predicted on the half-space
+ratio, and the process's peak memory; ``per_step``: the time loop's wall time less PARDISO's factorizations inside
+it (timed in the run), over its steps, and ``slope`` its least-squares slope against the dofs in log-log. Writes
+``hertz_ratio.csv`` (about 5 minutes at the default levels; the last, 193k dofs, takes 3 of them and 3 GB). ``--compare``: each level also without the zone predicted on the half-space
 model (``CoupledActiveSet.predict = False``: the half-space preconditioner alone) and without the half-space at all
 (``HalfSpace.bounds = (0, 0)``: the diagonal preconditioner), in the same run (``preconditioner`` column).
 """
@@ -23,12 +24,14 @@ import subprocess
 import sys
 from pathlib import Path
 
+import numpy as np
+
 CHILD = """
 import json, resource, sys, time
 sys.path.insert(0, "studies")
 from threadpoolctl import threadpool_limits
 import workbench
-from workbench.discrete import discretisation, solvers
+from workbench.discrete import discretisation, pardiso, solvers
 from workbench.schemes.coupled_contact import CoupledActiveSet, HalfSpace
 hc, preconditioner = float(sys.argv[1]), sys.argv[2]
 if preconditioner == "diagonal":
@@ -45,16 +48,29 @@ with threadpool_limits(1):
         times.append((t1 - t0, time.perf_counter() - t1))
         del d
     assemble, factor = min(times, key=lambda t: t[1])
+    factoring = []  # (PARDISO's factorizations inside the run, timed: a step's cost is the loop's without them)
+    init = pardiso.Factor.__init__
+
+    def timed(self, *args, **kwargs):
+        t = time.perf_counter()
+        init(self, *args, **kwargs)
+        factoring.append(time.perf_counter() - t)
+
+    pardiso.Factor.__init__ = timed
     t0 = time.perf_counter()
     ds = workbench.run("memory_hertz3d", h_contact=hc, progress=False, threads=1)
     run = time.perf_counter() - t0
+    pardiso.Factor.__init__ = init
+steps = ds.sizes["time"] - 1
 print(json.dumps(dict(h_contact=hc, preconditioner=preconditioner, ndof=int(ds.attrs["ndof"]),
                       contact_vertices=int(ds.sizes["node"]),
                       contact_solver=ds.attrs["contact_solver_used"], linear_solver=ds.attrs["linear_solver"],
                       backsubs=int(ds.linear_solves.sum()),
                       cg_iterations=int(ds.linear_iterations.sum()) if "linear_iterations" in ds else 0,
                       assemble=round(assemble, 2), factor_sparsecholesky=round(factor, 2), run=round(run, 2),
-                      ratio=round(run / factor, 2),
+                      ratio=round(run / factor, 2), loop=round(float(ds.attrs["wall_time"]), 2),
+                      factor_in_run=round(sum(factoring), 2),
+                      per_step=round((float(ds.attrs["wall_time"]) - sum(factoring)) / steps, 3),
                       peak_mb=round(resource.getrusage(resource.RUSAGE_SELF).ru_maxrss / 1024.0))))
 """
 
@@ -78,10 +94,16 @@ def main():
         for preconditioner in variants if args.compare else variants[:1]:
             rows.append(one(hc, preconditioner))
             print(rows[-1], flush=True)
+    predicted = [r for r in rows if r["preconditioner"] == "half-space, predicted"]
+    if len(predicted) > 1:  # (issue 22: a step's cost against the dofs, slope <= 1.2 in log-log)
+        fit = np.polyfit(np.log([r["ndof"] for r in predicted]), np.log([r["per_step"] for r in predicted]), 1)[0]
+        for r in predicted:
+            r["slope"] = round(float(fit), 3)
+        print("slope of a step's cost (the loop without its factorizations) against the dofs:", round(float(fit), 3))
     out = Path(args.out)
     out.mkdir(parents=True, exist_ok=True)
     with open(out / "hertz_ratio.csv", "w", newline="") as f:
-        writer = csv.DictWriter(f, fieldnames=list(rows[0]))
+        writer = csv.DictWriter(f, fieldnames=list(dict.fromkeys(k for r in rows for k in r)))
         writer.writeheader()
         writer.writerows(rows)
     print("| h_contact | dofs | contact vertices | solver | preconditioner | back-substitutions (CG) | assemble K | "
