@@ -155,17 +155,21 @@ class HalfSpace:
             return G[np.ix_(*at)]
         return self._between(P, Q)
 
-    def block(self, U: np.ndarray, scale: float = 1.0) -> np.ndarray:
-        """``scale`` x :meth:`compliance` of U (a new array), cut from the last block computed when that holds U (the
-        active set's systems and the prediction's work on subsets of one set of points), and where it holds most of U
-        only the new points' rows computed (the next step's points: measured on the hemisphere at 193k dofs, the
-        kernel's evaluations over the run 4.1 s -> 1.1 s)."""
+    def block(self, U: np.ndarray, scale: float | None = None) -> np.ndarray:
+        """``scale`` x :meth:`compliance` of U, a new array; without ``scale`` the compliance itself, which may be the
+        block kept (to read, not to write). Cut from the last block computed when that holds U (the active set's
+        systems and the prediction's work on subsets of one set of points), and where it holds most of U only the new
+        points' rows computed (the next step's points: measured on the hemisphere at 193k dofs, the kernel's
+        evaluations over the run 4.1 s -> 1.1 s)."""
         last, G = self._block
         where = np.minimum(np.searchsorted(last, U), max(last.size - 1, 0))
         held = (last[where] == U) if last.size else np.zeros(U.size, dtype=bool)
         if held.all():
+            if scale is None and U.size == last.size:
+                return G
             B = G[np.ix_(where, where)]
-            B *= scale
+            if scale is not None:
+                B *= scale
             return B
         if np.count_nonzero(held) > 0.5 * U.size:
             old, new = np.nonzero(held)[0], np.nonzero(~held)[0]
@@ -176,7 +180,7 @@ class HalfSpace:
         else:
             B = self.compliance(U)
         self._block = (np.array(U), B)
-        return scale * B
+        return B if scale is None else scale * B
 
     def scale(self, U: np.ndarray, local: np.ndarray) -> float:
         """c matching c G_ii to ``local`` (S's diagonal estimate 1 / K_ii on the points U) at the median."""
@@ -405,8 +409,8 @@ class ZonePrediction:
         ``problem`` = (b, w, lam0, rho) on C: (states, lam); raises _Cycled or _Outgrown (more unknowns than a dense
         factor is allowed). Its factors are updated from one active set to the next (:class:`ModelFactor`)."""
         b, w, lam0, rho = problem
-        M = half.block(C, c)
-        layer, shifted = self.layer, b + M @ lam0  # (s = shifted - M lam)
+        G = half.block(C)  # (M = c G, never formed: G may be the half-space's own block)
+        layer, shifted = self.layer, b + c * (G @ lam0)  # (s = shifted - M lam)
         if states is None:
             states = layer.state_of(b + rho * lam0, rho * w)
         seen = set()
@@ -423,8 +427,8 @@ class ZonePrediction:
                     solve = half.factors(C[U], D[U], c)
                 except la.LinAlgError:
                     raise _Cycled from None  # (the model is not positive definite here: no guide either)
-                lam[U] = solve(rhs[U] - M[U] @ lam if lam.any() else rhs[U])  # (lam: the forces known, mostly 0)
-            new = layer.state_of(shifted - M @ lam + rho * lam, rho * w)
+                lam[U] = solve(rhs[U] - c * (G[U] @ lam) if lam.any() else rhs[U])  # (lam: the forces known, mostly 0)
+            new = layer.state_of(shifted - c * (G @ lam) + rho * lam, rho * w)
             if np.array_equal(new, states):
                 return states, lam
             states = new
