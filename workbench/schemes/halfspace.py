@@ -18,7 +18,9 @@ that far closer (:class:`HalfSpace`, ``mirrors`` and ``held``):
 Measured on the hemisphere at h_contact = 0.01 (the 287 points in contact at the full load, S formed column by
 column): the generalised eigenvalues of (S, c G_UU) span 0.93-134.8 with the plain half-space, 0.94-66.9 with the
 images, 1.10-3.66 with images and apex (0.57-1740 for the diagonal 1 / K_ii). That makes the model good enough to
-*predict* the contact zone (:meth:`HalfSpace.predict`), not only to precondition the solves on it.
+*predict* the contact zone (:class:`ZonePrediction`), not only to precondition the solves on it. Both solve with
+the model's dense matrix on sets of points that change a little from one solve to the next, through one factor
+updated by low-rank corrections (:class:`ModelFactor`).
 
 Examples
 --------
