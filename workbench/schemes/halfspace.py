@@ -208,12 +208,12 @@ class ModelFactor:
 
         A_0 x_0 + A_0N x_N + E_R mu = r_0,   A_N0 x_0 + A_NN x_N = r_N,   E_R^T x_0 = 0.
 
-    With Z_N = A_0^-1 A_0N and Y_R = A_0^-1 E_R (a column per point, computed once per base and kept while the
-    point stays changed) x_N solves T x_N = r_N - A_N0 q + Z_R^T Y_RR^-1 q_R, q = A_0^-1 r_0, where
-    T = A_NN - A_N0 Z_N + Z_R^T Y_RR^-1 Z_R is the Schur complement A_NN - A_NI A_II^-1 A_IN (Z_R: Z_N's rows R,
-    Y_RR: Y_R's). A solve costs one solve with the base factor and products with the |R| + |N| columns; a set beyond
-    :attr:`rebase` x |U| changed points (or another c) becomes the new base. ``factorizations`` counts the base
-    factors.
+    With Z_N = A_0^-1 A_0N and Y_R = A_0^-1 E_R (a column per point, computed once per base and kept while the point
+    stays changed, dropped once it is not) x_N solves T x_N = r_N - A_N0 q + Z_R^T Y_RR^-1 q_R, q = A_0^-1 r_0,
+    where T = A_NN - A_N0 Z_N + Z_R^T Y_RR^-1 Z_R is the Schur complement A_NN - A_NI A_II^-1 A_IN (Z_R: Z_N's rows
+    R, Y_RR: Y_R's). A solve costs one solve with the base factor and products with the |R| + |N| columns; a set
+    beyond :attr:`rebase` x |U| changed points (or another c) becomes the new base. ``factorizations`` counts the
+    base factors.
 
     >>> x = np.array([[0.0, 0.0, 0.0], [1.0, 0.0, 0.0], [0.0, 1.0, 0.0], [1.0, 1.0, 0.0]])
     >>> half = HalfSpace(x, np.full(4, 0.1))
@@ -318,6 +318,9 @@ class ModelFactor:
             A = c * self.half.between(U0, points[absent])
             for j, a, z in zip(absent, A.T, la.cho_solve(factor, A, check_finite=False).T):
                 new[keys[j]] = (a, z)
+        # (only the columns of the points changed now are kept: a set that drifts within ``rebase`` of its base over
+        # many steps would otherwise keep one for every point it ever changed)
+        self._columns = removed, new = {i: removed[i] for i in R}, {key: new[key] for key in keys}
         Y = np.array([removed[i] for i in R]).T if R.size else np.zeros((U0.size, 0))
         A_0N = np.array([new[key][0] for key in keys]).T if keys else np.zeros((U0.size, 0))
         Z = np.array([new[key][1] for key in keys]).T if keys else np.zeros((U0.size, 0))
