@@ -119,7 +119,8 @@ class ContactNodes:
         ``u``: the displacement the step starts from (a dof vector; default: the discretisation's), where projected
         Gauss-Seidel starts should the states cycle."""
         total = 0
-        first = self.rho_scales.index(self._scale)  # (the scale that last settled is tried first)
+        # (the scale that last settled is tried first)
+        first = self.rho_scales.index(self._scale) if self._scale in self.rho_scales else 0
         for scale in self.rho_scales[first:] + self.rho_scales[:first]:
             found, total = self._active_set(S_inv, scale * rho, s_free, self.states.copy(), total)
             if found is not None:

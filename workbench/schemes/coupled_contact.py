@@ -91,7 +91,8 @@ class CoupledActiveSet:
         nodes = self.nodes
         self.linear_iterations = 0
         total = 0
-        first = self.rho_scales.index(self._scale)  # (the scale that last settled is tried first)
+        # (the scale that last settled is tried first)
+        first = self.rho_scales.index(self._scale) if self._scale in self.rho_scales else 0
         for scale in self.rho_scales[first:] + self.rho_scales[:first]:
             found, total = self._active_set(schur, scale * rho, s_free, time, total)
             if found is not None:
