@@ -28,6 +28,17 @@ from ..errors import NewtonFailed
 from ..physics import unilateral
 
 
+def scales_from(scales: tuple, last: float) -> tuple:
+    """The prediction's scales in the order to try them: from ``last`` (the one that settled last time) where it is
+    still among them, the rest after it.
+
+    >>> scales_from((1.0, 0.01, 100.0), 0.01)
+    (0.01, 100.0, 1.0)
+    """
+    first = scales.index(last) if last in scales else 0
+    return scales[first:] + scales[:first]
+
+
 class ContactNodes:
     """The contact points of Model B on one discretisation, their weights and initial gaps, and the active set."""
 
@@ -119,9 +130,7 @@ class ContactNodes:
         ``u``: the displacement the step starts from (a dof vector; default: the discretisation's), where projected
         Gauss-Seidel starts should the states cycle."""
         total = 0
-        # (the scale that last settled is tried first)
-        first = self.rho_scales.index(self._scale) if self._scale in self.rho_scales else 0
-        for scale in self.rho_scales[first:] + self.rho_scales[:first]:
+        for scale in scales_from(self.rho_scales, self._scale):
             found, total = self._active_set(S_inv, scale * rho, s_free, self.states.copy(), total)
             if found is not None:
                 self._scale = scale

@@ -43,6 +43,7 @@ import numpy as np
 from ..errors import NewtonFailed
 from ..input.numerics import COUPLED_FROM_SCHUR
 from ..physics.unilateral import RIGID, SEPARATED, STUCK
+from .contact_nodes import scales_from
 from .halfspace import HalfSpace, ZonePrediction, dense_points, state_system
 
 __all__ = ["CoupledActiveSet", "HalfSpace", "KrylovMemory", "condensed_up_to", "dense_points"]
@@ -91,9 +92,7 @@ class CoupledActiveSet:
         nodes = self.nodes
         self.linear_iterations = 0
         total = 0
-        # (the scale that last settled is tried first)
-        first = self.rho_scales.index(self._scale) if self._scale in self.rho_scales else 0
-        for scale in self.rho_scales[first:] + self.rho_scales[:first]:
+        for scale in scales_from(self.rho_scales, self._scale):
             found, total = self._active_set(schur, scale * rho, s_free, time, total)
             if found is not None:
                 self._scale = scale
