@@ -1,6 +1,7 @@
 """The banded Cholesky (RCM order) and MKL PARDISO's Cholesky solve the same systems as NGSolve's sparse Cholesky."""
 import numpy as np
 import pytest
+import scipy.sparse as sp
 import xarray as xr
 
 import workbench
@@ -35,6 +36,7 @@ def test_auto_takes_the_band_only_when_it_is_narrow_and_small(monkeypatch):
     K = solvers.to_scipy(d.viscous.mat)
     free = np.nonzero(np.array(d.fes.FreeDofs(), dtype=bool))[0]
     _, bandwidth = solvers.rcm(K, free)
+    assert bandwidth == solvers.BandedCholesky(K, free).bandwidth  # (read from the permuted matrix itself)
     band = 8.0 * (bandwidth + 1) * free.size
     assert solvers.factor(d.viscous.mat, d.fes.FreeDofs(), d.u.vec).name == "banded"
     monkeypatch.setattr(solvers, "BAND_BYTES", 0.5 * band)
@@ -133,3 +135,13 @@ def test_model_a_implicit_archives_record_the_linear_solver_the_steps_took(tmp_p
     ds.to_netcdf(tmp_path / "b.nc")
     with xr.open_dataset(tmp_path / "b.nc") as back:
         assert back.attrs["linear_solver"] == SPARSE
+
+
+def test_the_free_block_is_scipys_cut():
+    """free_block against SciPy's own indexing, on a random sparse matrix with free dofs in and out of order."""
+    rng = np.random.default_rng(3)
+    K = sp.random(40, 40, density=0.2, random_state=4, format="csr")
+    for free in (np.sort(rng.choice(40, 25, replace=False)), rng.permutation(40)[:30]):
+        block = solvers.free_block(K, free)
+        assert block.shape == (free.size, free.size)
+        assert np.array_equal(block.toarray(), K[free][:, free].toarray())
