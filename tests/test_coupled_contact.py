@@ -369,3 +369,27 @@ def test_a_continued_coupled_run_equals_the_straight_one_to_the_solver_tolerance
     np.testing.assert_array_equal(continued.contact_state.values, straight.contact_state.values)
     scale = float(np.abs(straight.u_contact).max())
     assert float(np.abs(continued.u_contact - straight.u_contact).max()) <= 1e-9 * scale
+
+
+def test_contact_tol_trades_back_substitutions_for_accuracy():
+    """contact_tol: left at its default, the tight solve of before (10^-11, recorded in the archive), and the
+    reference here; looser ones take fewer back-substitutions and move u at the contact points in proportion to
+    contact_tol (measured: 2-7 x it on the hemisphere at h_contact = 0.02): the error's slope against the tolerance
+    is about 1, and never beyond 30 x. A value beyond its range, and a Model A scene, are refused with the reason."""
+    kw = dict(h_contact=0.02, contact_solver="coupled", progress=False)
+    default = workbench.run("memory_hertz3d", **kw)  # (contact_tol left at its default)
+    assert default.attrs["contact_tol"] == 1e-11
+    reference = default.u_contact.values
+    scale = np.abs(reference).max()
+    tols = (1e-10, 1e-8, 1e-6)
+    runs = [workbench.run("memory_hertz3d", contact_tol=tol, **kw) for tol in tols]
+    errors = np.array([np.abs(ds.u_contact.values - reference).max() / scale for ds in runs])
+    solves = [int(ds.linear_solves.sum()) for ds in [default] + runs]
+    assert all(a > b for a, b in zip(solves, solves[1:])), solves
+    assert np.all(errors <= 30.0 * np.array(tols)), errors
+    slope = np.polyfit(np.log(tols), np.log(errors), 1)[0]
+    assert 0.7 < slope < 1.5, (slope, errors)
+    with pytest.raises(ParameterError, match="contact_tol does not apply to the Model A"):
+        workbench.scene("hertz3d", contact_tol=1e-9)
+    with pytest.raises(ParameterError, match=r"contact_tol = 1e-05 is outside the allowed range 1e-14 <= contact_tol"):
+        workbench.scene("memory_hertz3d", contact_tol=1e-5)

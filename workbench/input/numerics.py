@@ -59,6 +59,8 @@ CONTROL = ("rtol", "atol", "k_min", "k_max")
 ADAPT = ("space_tol", "max_dofs", "space_adapt", "space_goal", "edge_tol")
 #: The explicit scheme's stability override.
 EXPLICIT = ("allow_unstable",)
+#: Model B: the tolerance of the coupled contact solve.
+VI = ("contact_tol",)
 #: Model B: the rule of the memory integral and the approximation of a general kernel.
 MEMORY = ("memory_rule", "kernel_approximation", "kernel_tol")
 #: The mesh options a geometry may add to SPACE.
@@ -66,7 +68,7 @@ MESH = ("nx", "ny", "nz", "h_contact")
 
 #: Every numerical option: two runs that differ only in these model the same problem (a study compares them with
 #: one reference; any other difference is physics).
-DISCRETISATION = frozenset(SPACE + TIME + CONTROL + ADAPT + EXPLICIT + MEMORY + MESH)
+DISCRETISATION = frozenset(SPACE + TIME + CONTROL + ADAPT + EXPLICIT + VI + MEMORY + MESH)
 #: The options along which a study fits an observed order (the finest value is the smallest).
 REFINEMENT = ("h", "k", "rtol", "h_contact", "space_tol", "edge_tol")
 #: The axes every study has (length 1 when not swept), and the command line's named options besides T.
@@ -128,6 +130,7 @@ class Numerics:
     order: int = 1
     solver: str = "auto"
     contact_solver: str = "auto"
+    contact_tol: float = 1e-11
     rtol: float = 0.0
     atol: float = 1e-9
     k_min: float = 1e-9

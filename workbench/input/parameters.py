@@ -99,6 +99,11 @@ _TABLE: dict[str, Param] = {p.name: p for p in [
        "factorization (MKL; Model B's 3D contact vertices sooner, from about 1000 to 2500 as K's factor grows), else "
        "when they outnumber 20 x the steps, or 5000", "choice",
        choices=("auto", "condensed", "coupled")),
+    _p("contact_tol", 1e-11, "1", "Model B, the coupled contact solver: the residual at which a step's forces are "
+       "taken as solved once its active set has settled, relative to the contact points' displacement scale "
+       "(larger: fewer back-substitutions, and the solution further from the exact discrete one: on the Hertz "
+       "hemisphere at 47k dofs 1e-9 moved u by 1.3e-8 of its largest value and the pressure by 7.1e-6 of its peak, "
+       "1e-7 by 1e-6 and 4.1e-4; docs/schemes.md)", lower=1e-14, upper=1e-6),
     # material
     _p("E", 1000.0, "Pa", "Young's modulus (elasticity G)", **_POS),
     _p("nu", 0.3, "1", "Poisson's ratio (elasticity G)", lower=-1.0, upper=0.5, lower_open=True, upper_open=True),

@@ -31,7 +31,7 @@ from ..errors import ParameterError
 from ..values import Param, closest_name, to_plain
 from .geometry import GEOMETRIES
 from .models import MODELS
-from .numerics import ADAPT, CONTROL, EXPLICIT, MEMORY, SCHEMES, SPACE, TIME, is_adaptive, schemes_of
+from .numerics import ADAPT, CONTROL, EXPLICIT, MEMORY, SCHEMES, SPACE, TIME, VI, is_adaptive, schemes_of
 from .parameters import LAW_PARAMETERS, PARAMETERS
 
 try:  # Python >= 3.11
@@ -41,8 +41,8 @@ except ModuleNotFoundError:  # pragma: no cover
 
 _CONTACT = ("contact", "adhesion", "c_nu", "m_nu", "gap", "gamma_nu", "eps_a", "L", "beta0",
             "bonding_truncation") + LAW_PARAMETERS
-_TIME_B = ("T",) + SPACE + TIME + CONTROL + ADAPT  # Model B's numerics (and its memory's, _MEMORY)
-_TIME = _TIME_B + EXPLICIT
+_TIME = ("T",) + SPACE + TIME + CONTROL + ADAPT + EXPLICIT
+_TIME_B = ("T",) + SPACE + TIME + CONTROL + ADAPT + VI  # Model B's numerics (and its memory's, _MEMORY)
 _OUTPUT = ("probes", "snapshots", "checkpoint_every")
 _KV = ("E", "nu", "a1", "a2", "elastic_tensor", "viscous_tensor")
 _UNILATERAL = ("gap", "F", "c")
@@ -94,7 +94,9 @@ MESH_SCENES = {(2, "A"): "mesh2d", (3, "A"): "mesh3d", (2, "B"): "memory_mesh2d"
 
 #: Parameters a model refuses with a reason (rather than as merely unknown).
 _NOT_APPLICABLE = {"B": {"u0": "without viscosity the problem is quasistatic in u, so u(0) is the solution of the "
-                               "inequality at t = 0 (computed), not an initial condition"}}
+                               "inequality at t = 0 (computed), not an initial condition"},
+                   "A": {"contact_tol": "it sets Model B's coupled contact solve; Model A's implicit steps solve their "
+                                        "contact by Newton's method to a tolerance of their own"}}
 
 
 @dataclass(frozen=True)

@@ -109,7 +109,8 @@ class MemoryVI(ErrorControlled, Scheme):
         self.coupled = None
         limit = condensed_up_to(d.ndof, self.method) if self.vertices_only and d.dim == 3 else COUPLED_FROM_SCHUR
         if d.numerics.coupled_contact(self.size, self.method, solvers.forms_schur(self.method), limit):
-            self.coupled = CoupledActiveSet(self.nodes, self.method, d.ndof) if x.solves else True
+            self.coupled = CoupledActiveSet(self.nodes, self.method, d.ndof, d.numerics.contact_tol) \
+                if x.solves else True
         self.memory = rule_for(d, self.trapezoid)  # (None without memory)
         self._balance = None  # f - memory of the last equilibrium (only for the reaction of pinned contact nodes)
         self._operators = OrderedDict()
