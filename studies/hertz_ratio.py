@@ -13,6 +13,8 @@ it (timed in the run), over its steps, and ``slope`` its least-squares slope aga
 ``hertz_ratio.csv`` (about 5 minutes at the default levels; the last, 193k dofs, takes 3 of them and 3 GB). ``--compare``: each level also without the zone predicted on the half-space
 model (``CoupledActiveSet.predict = False``: the half-space preconditioner alone) and without the half-space at all
 (``HalfSpace.bounds = (0, 0)``: the diagonal preconditioner), in the same run (``preconditioner`` column).
+``--k K``: steps of K instead of the scene's 4 (``hertz_ratio_kK.csv``: a step's cost when each step moves the zone
+by less).
 """
 from __future__ import annotations
 
@@ -34,6 +36,7 @@ import workbench
 from workbench.discrete import discretisation, pardiso, solvers
 from workbench.schemes.coupled_contact import CoupledActiveSet, HalfSpace
 hc, preconditioner = float(sys.argv[1]), sys.argv[2]
+step_k = dict(k=float(sys.argv[3])) if sys.argv[3] != "default" else {}
 if preconditioner == "diagonal":
     HalfSpace.bounds = (0, 0)
 CoupledActiveSet.predict = preconditioner == "half-space, predicted"
@@ -58,10 +61,10 @@ with threadpool_limits(1):
 
     pardiso.Factor.__init__ = timed
     t0 = time.perf_counter()
-    ds = workbench.run("memory_hertz3d", h_contact=hc, progress=False, threads=1)
+    ds = workbench.run("memory_hertz3d", h_contact=hc, progress=False, threads=1, **step_k)
     run = time.perf_counter() - t0
     pardiso.Factor.__init__ = init
-steps = ds.sizes["time"] - 1
+steps = int(ds.attrs["nsteps"])
 print(json.dumps(dict(h_contact=hc, preconditioner=preconditioner, ndof=int(ds.attrs["ndof"]),
                       contact_vertices=int(ds.sizes["node"]),
                       contact_solver=ds.attrs["contact_solver_used"], linear_solver=ds.attrs["linear_solver"],
@@ -75,10 +78,10 @@ print(json.dumps(dict(h_contact=hc, preconditioner=preconditioner, ndof=int(ds.a
 """
 
 
-def one(hc: float, preconditioner: str) -> dict:
+def one(hc: float, preconditioner: str, k=None) -> dict:
     env = dict(os.environ, OMP_NUM_THREADS="1", MKL_NUM_THREADS="1", OPENBLAS_NUM_THREADS="1")
-    done = subprocess.run([sys.executable, "-c", CHILD, str(hc), preconditioner], capture_output=True, text=True,
-                          env=env, check=True)
+    args = [sys.executable, "-c", CHILD, str(hc), preconditioner, "default" if k is None else str(k)]
+    done = subprocess.run(args, capture_output=True, text=True, env=env, check=True)
     return json.loads(done.stdout.strip().splitlines()[-1])
 
 
@@ -87,12 +90,13 @@ def main():
     p.add_argument("--out", default="data/hertz")
     p.add_argument("--levels", type=float, nargs="+", default=[0.005, 0.0035, 0.0025])
     p.add_argument("--compare", action="store_true")
+    p.add_argument("--k", type=float, default=None, help="the step (default: the scene's, 4 steps to T = 1)")
     args = p.parse_args()
     rows = []
     for hc in args.levels:
         variants = ("half-space, predicted", "half-space", "diagonal")
         for preconditioner in variants if args.compare else variants[:1]:
-            rows.append(one(hc, preconditioner))
+            rows.append(one(hc, preconditioner, args.k))
             print(rows[-1], flush=True)
     predicted = [r for r in rows if r["preconditioner"] == "half-space, predicted"]
     if len(predicted) > 1:  # (issue 22: a step's cost against the dofs, slope <= 1.2 in log-log)
@@ -102,7 +106,8 @@ def main():
         print("slope of a step's cost (the loop without its factorizations) against the dofs:", round(float(fit), 3))
     out = Path(args.out)
     out.mkdir(parents=True, exist_ok=True)
-    with open(out / "hertz_ratio.csv", "w", newline="") as f:
+    name = "hertz_ratio.csv" if args.k is None else f"hertz_ratio_k{args.k:g}.csv"
+    with open(out / name, "w", newline="") as f:
         writer = csv.DictWriter(f, fieldnames=list(dict.fromkeys(k for r in rows for k in r)))
         writer.writeheader()
         writer.writerows(rows)
