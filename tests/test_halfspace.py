@@ -223,3 +223,28 @@ def test_the_condensed_active_set_gives_up_a_wandering_scale_too(monkeypatch):
     ds = workbench.run("memory_hertz3d", contact_solver="condensed", h_contact=0.01, gap=0.002, F=5.0, c=1e4,
                        progress=False)
     assert int(ds.iterations.values[2:].max()) <= 10
+
+
+def test_blocks_cut_and_extended_equal_the_compliance_computed_afresh():
+    """HalfSpace.block on a run of point sets that grow by a few points (the storage of the block before last then
+    takes the next one), lose some, come back, and jump: every block equals the compliance computed afresh, and the
+    block the caller got last stays intact while the next one is built."""
+    rng = np.random.default_rng(5)
+    x = np.column_stack([rng.random(400), rng.random(400), np.zeros(400)])
+    half = HalfSpace(x, np.full(400, 1e-4), mirrors=(0, 1), held=np.zeros(3))
+    fresh = HalfSpace(x, np.full(400, 1e-4), mirrors=(0, 1), held=np.zeros(3))
+    sets = [np.arange(0, 200), np.arange(0, 210), np.arange(0, 215), np.arange(0, 222), np.arange(5, 222),
+            np.arange(0, 230), np.arange(0, 230), np.arange(0, 120), np.r_[0:100, 150:260], np.arange(300, 400)]
+    reused, last = 0, None
+    for U in sets:
+        kept = None if last is None else last.copy()
+        spare = half._store
+        G = half.block(U)
+        reused += spare is not None and G.base is spare
+        np.testing.assert_allclose(G, fresh.compliance(U), rtol=1e-13, atol=0)
+        if kept is not None:
+            np.testing.assert_array_equal(last, kept)  # (the last block, still read by its caller)
+        scaled = half.block(U, 2.0)
+        np.testing.assert_allclose(scaled, 2.0 * fresh.compliance(U), rtol=1e-13, atol=0)
+        last = G
+    assert reused >= 2  # (the storage was taken over, not only allocated)
