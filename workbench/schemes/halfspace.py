@@ -261,7 +261,9 @@ class ModelFactor:
             A *= c
             A[np.diag_indices_from(A)] += D
             self._base, self._columns, self._last = None, ({}, {}), (None, None)
-            factor = la.cho_factor(A, overwrite_a=True, check_finite=False)
+            # (A is symmetric: its transpose is the same matrix in Fortran order, which LAPACK factors in place; A
+            # itself, in C order, was copied first, a second m x m array at every new base)
+            factor = la.cho_factor(A.T, lower=True, overwrite_a=True, check_finite=False)
             self.factorizations += 1
             self._base = (U.copy(), D.copy(), c, factor)
             solve = lambda r: la.cho_solve(factor, r, check_finite=False)  # noqa: E731
