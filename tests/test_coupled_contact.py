@@ -393,3 +393,6 @@ def test_contact_tol_trades_back_substitutions_for_accuracy():
         workbench.scene("hertz3d", contact_tol=1e-9)
     with pytest.raises(ParameterError, match=r"contact_tol = 1e-05 is outside the allowed range 1e-14 <= contact_tol"):
         workbench.scene("memory_hertz3d", contact_tol=1e-5)
+    with pytest.raises(ParameterError, match="contact_solver = 'condensed' solves each active set exactly"):
+        workbench.scene("memory_slab", contact_tol=1e-9, contact_solver="condensed")  # (it would be ignored)
+    workbench.scene("memory_slab", contact_tol=1e-9)  # (auto: condensed or coupled by size, so a sweep over h runs)

@@ -400,6 +400,12 @@ def _check_solvers(v, scheme, model):
         raise ParameterError(f"contact_solver = 'coupled' applies to the schemes that solve a contact problem each "
                              f"step ({coupled}); scheme = {v['scheme']!r} takes its contact forces from the last step: "
                              "leave contact_solver = 'auto'")
+    if v["contact_solver"] == "condensed" and v.get("contact_tol", PARAMETERS["contact_tol"].default) != \
+            PARAMETERS["contact_tol"].default:
+        raise ParameterError(f"contact_tol = {v['contact_tol']:g} sets the coupled contact solve's residual; "
+                             "contact_solver = 'condensed' solves each active set exactly (a dense factor), so it "
+                             "would change nothing: leave contact_tol at its default, or give contact_solver = "
+                             "'coupled' or 'auto'")
 
 
 def _check_adaptive(body, v) -> None:
