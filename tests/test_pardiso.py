@@ -164,6 +164,8 @@ def test_without_mkl_pardiso_is_refused_before_any_work_and_auto_keeps_ngsolves_
     monkeypatch.setattr(pardiso, "available", lambda: False)
     with pytest.raises(ParameterError, match="solver = 'pardiso' needs Intel MKL"):
         workbench.run("memory_hertz3d", solver="pardiso", progress=False)
+    with pytest.raises(ParameterError, match="solver = 'mixed' needs Intel MKL"):
+        workbench.run("memory_hertz3d", solver="mixed", progress=False)  # (its factor is PARDISO's too)
     ds = workbench.run("memory_hertz3d", progress=False)
     assert ds.attrs["linear_solver"] == "sparsecholesky"
 
@@ -198,4 +200,5 @@ def test_the_factor_estimate_auto_decides_by_bounds_pardisos_own_count(name, kw)
     assert actual <= estimate <= 2.5 * actual, (actual, estimate)
     assert solvers.sparse_factor_bytes(3, d.ndof, "sparsecholesky") > 2.0 * actual
     assert solvers.choose("auto", 3, 200_000, True) == "auto"  # (a factor of about 1.5 GB: kept)
-    assert solvers.choose("auto", 3, 300_000, True) == "cg"  # (about 2.6 GB)
+    assert solvers.choose("auto", 3, 300_000, True) == "mixed"  # (about 2.6 GB; in single precision 1.3 GB)
+    assert solvers.choose("auto", 3, 700_000, True) == "cg"  # (about 3.5 GB in single precision)

@@ -127,6 +127,64 @@ def test_auto_takes_cg_for_a_large_3d_explicit_run_only(monkeypatch):
     assert np.abs(rods[0].u_contact - rods[1].u_contact).max() < 1e-9 * np.abs(rods[1].u_contact).max()
 
 
+@pytest.mark.skipif(not pardiso.available(), reason="needs MKL")
+def test_mixed_precision_solves_to_the_double_factor():
+    """solver = 'mixed': conjugate gradients in double precision on PARDISO's factor in single precision. On the
+    hemisphere's K (3D and graded, the ill-conditioned kind) a random load, a load on 50 surface points (whose true
+    residual stalls at 3e-12, above MIXED_TOL: it is accepted below CG_TOL, not iterated on to the limit) and a warm
+    start agree with the double factor to 1e-9, each in at most 6 iterations (measured 3), to a true residual below
+    CG_TOL. The single factor alone is 1e-4-1e-3 off: without the iterations it fails."""
+    d = discretisation.build(workbench.scene("memory_hertz3d", h_contact=0.01))
+    mixed = solvers.factor(d.elastic.mat, d.fes.FreeDofs(), d.u.vec, "mixed")
+    exact = solvers.factor(d.elastic.mat, d.fes.FreeDofs(), d.u.vec, "pardiso")
+    assert isinstance(mixed, solvers.MixedPrecision) and mixed.iterative and mixed.warm_start
+    K = solvers.to_scipy(d.elastic.mat)
+    free = np.array(d.fes.FreeDofs(), dtype=bool)
+    rng = np.random.default_rng(3)
+    points = np.zeros(d.ndof)
+    points[d.vertex_dofs[:50, 2]] = 1.0
+    for rhs in (rng.standard_normal(d.ndof), points):
+        x, y = np.zeros(d.ndof), np.zeros(d.ndof)
+        exact.solve(rhs, x)
+        mixed.solve(rhs, y)
+        assert 1 <= mixed.last_iterations <= 6
+        assert np.all(y[~free] == 0)
+        assert np.abs(y - x).max() < 1e-9 * np.abs(x).max()
+        assert np.linalg.norm((K @ y - rhs)[free]) <= solvers.CG_TOL * np.linalg.norm(rhs[free])
+        single = np.zeros(d.ndof)
+        single[free] = mixed.factor.solve(rhs[free])
+        assert np.abs(single - x).max() > 1e-6 * np.abs(x).max()  # (what the iterations buy)
+        y[free] += 1e-3 * np.abs(x).max() * rng.standard_normal(free.sum())  # a guess near the solution
+        mixed.solve(rhs, y)
+        assert mixed.last_iterations <= 6 and np.abs(y - x).max() < 1e-9 * np.abs(x).max()
+
+
+@pytest.mark.parametrize("name, kw", [("memory_block", dict(T=0.2, k=0.1)), ("block", dict(scheme="bdf2", T=0.03,
+                                                                                             k=0.01))])
+def test_auto_takes_mixed_where_only_the_single_factor_fits(monkeypatch, name, kw):
+    """Beyond FACTOR_BYTES in 3D auto takes 'mixed' (PARDISO's factor in single precision, half the memory) where
+    that fits, and 'cg' where not, or without MKL; the run on 'mixed' solves its contact on the whole body and agrees
+    with the factored one to 1e-9 (measured 1e-11). Given by name with the condensed contact solver, 'mixed' is
+    refused as 'cg' is."""
+    kw = dict(h=0.1, progress=False, **kw)
+    direct = workbench.run(name, **kw)
+    n = direct.attrs["ndof"]
+    double = solvers.sparse_factor_bytes(3, n, "auto")
+    monkeypatch.setattr(solvers, "FACTOR_BYTES", 0.75 * double)  # (the double factor too large, the single not)
+    taken = "mixed" if pardiso.available() else "cg"
+    assert solvers.choose("auto", 3, n, True) == taken and solvers.choose("auto", 3, n, False) == "auto"
+    ds = workbench.run(name, **kw)
+    assert ds.attrs["linear_solver"] == taken and ds.attrs["contact_solver_used"] == "coupled"
+    assert np.abs(ds.u_probe - direct.u_probe).max() < 1e-9 * np.abs(direct.u_probe).max()
+    monkeypatch.setattr(solvers, "FACTOR_BYTES", 0.4 * double)  # (neither fits)
+    assert solvers.choose("auto", 3, n, True) == "cg"
+    monkeypatch.setattr(solvers, "FACTOR_BYTES", 0.75 * double)
+    monkeypatch.setattr(pardiso, "available", lambda: False)
+    assert solvers.choose("auto", 3, n, True) == "cg"
+    with pytest.raises(workbench.ParameterError, match="solver = 'mixed' \\(iterative\\)"):
+        workbench.scene(name, solver="mixed", contact_solver="condensed", **{k: kw[k] for k in ("scheme",) if k in kw})
+
+
 def test_model_a_implicit_archives_record_the_linear_solver_the_steps_took(tmp_path):
     """Model A's implicit schemes factor at their first step; the archive still says which solver it was (default
     arguments: the rod's band; asked for: PARDISO or NGSolve's factor on the block), also after netCDF."""

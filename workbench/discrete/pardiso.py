@@ -131,7 +131,9 @@ class Factor:
     """The sparse Cholesky factor of a symmetric positive definite SciPy matrix ``A`` (PARDISO, METIS ordering).
 
     ``solve(b)`` solves for one right-hand side or for the columns of an n x m array (several at once cost far less
-    than one at a time: the factor is read once per call). ``nonzeros``: the factor's.
+    than one at a time: the factor is read once per call). ``nonzeros``: the factor's. ``single``: the factor in
+    single precision (half the memory; solves to about 10^-3 on a stiffness matrix, a preconditioner:
+    :class:`workbench.discrete.solvers.MixedPrecision`).
 
     With ``keep`` (unknowns), the factorization eliminates the other unknowns first and stops there: ``schur`` is
     the dense Schur complement S = A_kk - A_ko A_oo^-1 A_ok on ``keep`` (sorted), computed inside this one
@@ -155,14 +157,20 @@ class Factor:
     ([[1.25]], 2.5, [2.0, 3.0, 3.0, 2.0])
     """
 
-    def __init__(self, A: sp.spmatrix, keep=None):
+    def __init__(self, A: sp.spmatrix, keep=None, single: bool = False):
         if not available():
             raise RuntimeError("MKL PARDISO is not available here (install the 'mkl' wheel)")
+        if single and keep is not None:
+            raise ValueError("a factor in single precision keeps no unknowns (PARDISO's Schur complement is double)")
         self.n = A.shape[0]
         self.keep = None if keep is None else np.unique(np.asarray(keep, dtype=np.int64))
         self._matrix = _upper(A)
+        self._dtype = np.float32 if single else np.float64
+        if single:  # (PARDISO's iparm[27] = 1: the matrix, right-hand sides and solutions all in single precision)
+            self._matrix = (self._matrix[0].astype(np.float32),) + self._matrix[1:]
         self._pt = np.zeros(64, dtype=np.int64)
         self._iparm = _parameters(self.keep is not None)
+        self._iparm[27] = 1 if single else 0
         self._perm = None
         self.schur, self._schur_factor = None, None
         out = np.zeros(1)
@@ -171,18 +179,18 @@ class Factor:
             self._perm = np.zeros(self.n, dtype=np.int64)
             self._perm[self.keep] = 1
             self.schur = out = np.zeros((self.keep.size, self.keep.size))
-        _call(self._pt, SPD, 12, self.n, self._matrix, self._iparm, np.zeros(1), out, 1, self._perm)
+        _call(self._pt, SPD, 12, self.n, self._matrix, self._iparm, np.zeros(1, self._dtype), out, 1, self._perm)
         self.nonzeros = int(self._iparm[17])
         weakref.finalize(self, _release, self._pt, SPD, self.n, self._iparm)
 
     def _phase(self, phase: int, b: np.ndarray) -> np.ndarray:
-        b = np.asarray(b, dtype=np.float64)
-        nrhs = 1 if b.ndim == 1 else b.shape[1]
-        rhs = np.array(b, order="F")  # (PARDISO takes the right-hand sides one after the other; a copy: 331 writes)
+        nrhs = 1 if np.ndim(b) == 1 else np.shape(b)[1]
+        # (PARDISO takes the right-hand sides one after the other, in the factor's precision; a copy: 331 writes)
+        rhs = np.array(b, dtype=self._dtype, order="F")
         x = np.zeros_like(rhs, order="F")
         if self.n and nrhs:
             _call(self._pt, SPD, phase, self.n, self._matrix, self._iparm, rhs, x, nrhs, self._perm)
-        return x
+        return x if self._dtype is np.float64 else x.astype(np.float64)
 
     def solve(self, b: np.ndarray) -> np.ndarray:
         if self.keep is None:

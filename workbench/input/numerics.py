@@ -91,6 +91,11 @@ COUPLED_PER_STEP, COUPLED_FROM = 20, 5000
 COUPLED_FROM_SCHUR = 2500
 
 
+#: The linear solvers that iterate on each solve (conjugate gradients: AMG-preconditioned, or on a single-precision
+#: factor), with no factor in double precision to form a condensed contact stiffness or repeat per-point solves with.
+ITERATIVE_SOLVERS = ("cg", "mixed")
+
+
 def may_iterate(scheme: str, contact_solver: str) -> bool:
     """Whether the systems of ``scheme`` may be solved without a factor (``solver = 'cg'``): the explicit scheme's,
     and the implicit ones' with their contact solved on the whole body (not ``contact_solver = 'condensed'``, whose
@@ -163,7 +168,7 @@ class Numerics:
         """
         if self.contact_solver != "auto":
             return self.contact_solver == "coupled"
-        if (solver or self.solver) == "cg":
+        if (solver or self.solver) in ITERATIVE_SOLVERS:
             return True  # (an iterative solver has no factor to repeat the condensed solver's per-point solves with)
         if schur:
             return unknowns > condensed_up_to

@@ -85,12 +85,13 @@ _TABLE: dict[str, Param] = {p.name: p for p in [
     _p("allow_unstable", False, "", "run the explicit scheme even when k exceeds its predicted stability limit",
        "flag"),
     _p("solver", "auto", "", "linear solver for the constant matrix: banded Cholesky (RCM order), MKL's pardiso "
-       "(a supernodal Cholesky, where the mkl wheel is installed), NGSolve's sparsecholesky or umfpack, or cg "
-       "(AMG-preconditioned conjugate gradients, no factor: the explicit scheme, and the implicit ones with the "
-       "coupled contact solver); auto = banded when the bandwidth is small, else pardiso (sparsecholesky without "
-       "MKL), cg in 3D when a sparse factor would exceed 2 GB (the explicit scheme, and the implicit ones unless "
-       "contact_solver = condensed)",
-       "choice", choices=("auto", "banded", "pardiso", "sparsecholesky", "umfpack", "cg")),
+       "(a supernodal Cholesky, where the mkl wheel is installed), NGSolve's sparsecholesky or umfpack, mixed "
+       "(conjugate gradients on pardiso's factor in single precision: half its memory, 3-4 iterations a solve), or cg "
+       "(AMG-preconditioned conjugate gradients, no factor); mixed and cg: the explicit scheme, and the implicit ones "
+       "with the coupled contact solver; auto = banded when the bandwidth is small, else pardiso (sparsecholesky "
+       "without MKL), and in 3D where a sparse factor would exceed 2 GB mixed, or cg where even the single one would "
+       "(the explicit scheme, and the implicit ones unless contact_solver = condensed)",
+       "choice", choices=("auto", "banded", "pardiso", "sparsecholesky", "umfpack", "mixed", "cg")),
     _p("contact_solver", "auto", "", "how an implicit step's contact problem is solved: condensed (the dense contact "
        "stiffness, made inside one factorization where MKL loads, else one solve per contact point) or coupled (on "
        "the whole body, conjugate gradients on the active contact points, one back-substitution each: for thousands "

@@ -31,7 +31,19 @@ from ..errors import ParameterError
 from ..values import Param, closest_name, to_plain
 from .geometry import GEOMETRIES
 from .models import MODELS
-from .numerics import ADAPT, CONTROL, EXPLICIT, MEMORY, SCHEMES, SPACE, TIME, VI, is_adaptive, schemes_of
+from .numerics import (
+    ADAPT,
+    CONTROL,
+    EXPLICIT,
+    ITERATIVE_SOLVERS,
+    MEMORY,
+    SCHEMES,
+    SPACE,
+    TIME,
+    VI,
+    is_adaptive,
+    schemes_of,
+)
 from .parameters import LAW_PARAMETERS, PARAMETERS
 
 try:  # Python >= 3.11
@@ -387,11 +399,11 @@ def _check_size(body, values) -> None:
 def _check_solvers(v, scheme, model):
     """The linear and contact solvers against what the scheme can do."""
     coupled_cg = scheme.coupled and v["contact_solver"] != "condensed"  # (no per-dof solves to repeat)
-    if v["solver"] == "cg" and not (scheme.iterative or coupled_cg):
+    if v["solver"] in ITERATIVE_SOLVERS and not (scheme.iterative or coupled_cg):
         iterative = " | ".join(repr(n) for n, e in SCHEMES.items() if e.iterative and e.model == model)
         coupled = " or contact_solver = 'coupled'" if scheme.coupled else ""
-        raise ParameterError(f"solver = 'cg' (iterative) applies to the scheme(s) {iterative or 'none'} and to the "
-                             f"coupled contact solver; scheme = {v['scheme']!r} with contact_solver = "
+        raise ParameterError(f"solver = {v['solver']!r} (iterative) applies to the scheme(s) {iterative or 'none'} "
+                             f"and to the coupled contact solver; scheme = {v['scheme']!r} with contact_solver = "
                              f"{v['contact_solver']!r} condenses on the contact dofs, one solve per contact dof: use "
                              f"solver = 'auto' (a direct factor){coupled}"
                              + (f" or scheme = {iterative}" if iterative else ""))

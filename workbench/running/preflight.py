@@ -43,9 +43,10 @@ def available_memory() -> float:
 
 
 def estimate(geometry, order: int, solver: str = "auto", iterative: bool = False) -> Estimate:
-    """Displacement dofs and bytes to assemble and factor the constant matrix (order of magnitude); with ``solver =
-    "cg"``, or ``"auto"`` where it resolves to cg (``iterative``: the explicit scheme, :func:`workbench.discrete.solvers.choose`),
-    the matrix copy and the AMG hierarchy of the iterative solver instead of a factor."""
+    """Displacement dofs and bytes to assemble and factor the constant matrix (order of magnitude; ``mixed``'s factor in
+    single precision, half the double one); with ``solver = "cg"``, or ``"auto"`` where it resolves to cg
+    (``iterative``: the explicit scheme, :func:`workbench.discrete.solvers.choose`), the matrix copy and the AMG
+    hierarchy of the iterative solver instead of a factor."""
     from ..discrete.solvers import PARDISO_WORK, choose, factor_kind, sparse_factor_bytes
 
     dim = geometry.dim
@@ -59,8 +60,8 @@ def estimate(geometry, order: int, solver: str = "auto", iterative: bool = False
         dissection = 8.0 * 30.0 * ndof * max(1.0, math.log2(ndof))
         factor = min(banded, dissection)
     else:
-        factor = sparse_factor_bytes(dim, ndof, solver)  # (the factor auto or the given solver takes, with its work)
-        factor *= PARDISO_WORK if factor_kind(solver) == "pardiso" else 1.0
+        taken = choose(solver, dim, ndof, iterative)  # (the factor auto or the given solver takes, with its work)
+        factor = sparse_factor_bytes(dim, ndof, taken) * (PARDISO_WORK if factor_kind(taken) == "pardiso" else 1.0)
     matrices = 8.0 * 3 * ndof * (9 * order ** dim) * dim  # K_A, K_G (and M): about 9 p^d dim entries per row
     if choose(solver, dim, ndof, iterative) == "cg":
         factor = 1.5 * matrices  # SciPy's copy of K_A, the AMG levels, CG's vectors (a run at 271k dofs: 2.1 GB peak)
@@ -69,11 +70,12 @@ def estimate(geometry, order: int, solver: str = "auto", iterative: bool = False
 
 def resources(scene, model, n_steps: int, processes: int = 1) -> None:
     """Refuse, before any work, a run whose factorisation cannot fit in the free memory (on several MPI
-    ``processes`` each holds its part: the estimate of the whole does not apply); and ``solver = 'pardiso'`` where
-    MKL cannot be loaded."""
-    if scene["solver"] == "pardiso" and not pardiso.available():
-        raise ParameterError("solver = 'pardiso' needs Intel MKL, which could not be loaded here (pip install mkl, "
-                             "x86-64 only); solver = 'sparsecholesky' is NGSolve's own sparse factor")
+    ``processes`` each holds its part: the estimate of the whole does not apply); and ``solver = 'pardiso'`` or
+    ``'mixed'`` where MKL cannot be loaded."""
+    if scene["solver"] in ("pardiso", "mixed") and not pardiso.available():
+        raise ParameterError(f"solver = {scene['solver']!r} needs Intel MKL, which could not be loaded here (pip "
+                             "install mkl, x86-64 only); solver = 'sparsecholesky' is NGSolve's own sparse factor, "
+                             "'cg' needs none")
     if processes > 1:
         return
     iterative = may_iterate(scene["scheme"], scene["contact_solver"])
