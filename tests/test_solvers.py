@@ -203,3 +203,37 @@ def test_the_free_block_is_scipys_cut():
         block = solvers.free_block(K, free)
         assert block.shape == (free.size, free.size)
         assert np.array_equal(block.toarray(), K[free][:, free].toarray())
+
+
+@pytest.mark.parametrize("name, kw", [("block", dict(scheme="bdf2", h=0.1, T=0.03, k=0.01)),
+                                      ("memory_slab", dict(h=0.1, T=0.2, k=0.1, memory_rule="trapezoid")),
+                                      ("memory_slab", dict(h=0.1, T=0.2, k=0.1, memory_rule="trapezoid",
+                                                           contact_solver="coupled"))],
+                         ids=["bdf2", "vi", "vi, coupled"])
+def test_a_scheme_frees_the_factor_it_drops_before_it_factors_the_next(monkeypatch, name, kw):
+    """Where a factored operator is large, a scheme holds only as many as fit FACTOR_BYTES together (factors_kept),
+    and drops the least recently used one, with its own references to it, before it factors the next: BDF2 factors
+    its backward-Euler start and then its own operator, Model B's vi (trapezoid rule) the operator of u(0) and then the
+    steps'. With one kept, no earlier factor is alive when the next is made (measured: BDF2 on the P2 block at 271k
+    dofs peaked at 5.67 GB holding both, 3.57 GB now); with the default cache one is. The coupled solver's remembered
+    products hold their operator weakly, so they keep no dropped factor alive. The results are the same."""
+    import weakref
+
+    made, alive_at = [], []
+    factor = solvers.factor
+
+    def tracked(*args, **kwargs):
+        alive_at.append(sum(ref() is not None for ref in made))  # (no gc.collect: the run does not call it either)
+        out = factor(*args, **kwargs)
+        made.append(weakref.ref(out))
+        return out
+
+    monkeypatch.setattr(solvers, "factor", tracked)
+    cached = workbench.run(name, progress=False, **kw)
+    assert len(made) == 2 and alive_at == [0, 1]
+    made.clear(), alive_at.clear()
+    monkeypatch.setattr(solvers, "factors_kept", lambda *args: 1)
+    ds = workbench.run(name, progress=False, **kw)
+    assert len(made) == 2 and alive_at == [0, 0]
+    assert np.abs(ds.u_probe - cached.u_probe).max() <= 1e-12 * np.abs(cached.u_probe).max()
+    assert solvers.factors_kept(3, 200_000, "auto", 4) == (1 if pardiso.available() else 4)  # (1.5 GB each)

@@ -38,6 +38,8 @@ Examples
 """
 from __future__ import annotations
 
+import weakref
+
 import numpy as np
 
 from ..errors import NewtonFailed
@@ -269,9 +271,9 @@ class KrylovMemory:
 
     >>> import numpy as np
     >>> memory = KrylovMemory(capacity=2)
-    >>> S = np.array([[2.0, 1.0], [1.0, 2.0]])
-    >>> for p in np.eye(2): memory.remember("S", p, S @ p)
-    >>> V, AV, SV = memory.basis("S", np.array([True, True]), np.zeros(2))
+    >>> S = np.array([[2.0, 1.0], [1.0, 2.0]])  # (the operator: here its matrix)
+    >>> for p in np.eye(2): memory.remember(S, p, S @ p)
+    >>> V, AV, SV = memory.basis(S, np.array([True, True]), np.zeros(2))
     >>> np.round(V.T @ S @ V, 12).tolist()  # A-orthonormal
     [[1.0, 0.0], [0.0, 1.0]]
     """
@@ -281,8 +283,12 @@ class KrylovMemory:
         self.owner, self.P, self.SP, self.support, self.last = None, [], [], [], None
 
     def _own(self, schur) -> None:
-        if schur is not self.owner:
-            self.owner, self.P, self.SP, self.support, self.last = schur, [], [], [], None
+        if not self._owns(schur):
+            # (a weak reference: the products must not keep an operator the scheme has dropped, and its factor, alive)
+            self.owner, self.P, self.SP, self.support, self.last = weakref.ref(schur), [], [], [], None
+
+    def _owns(self, schur) -> bool:
+        return self.owner is not None and self.owner() is schur
 
     def product(self, schur, x: np.ndarray) -> np.ndarray:
         """S x (a copy: the caller updates it), without a back-substitution when x is the last solution kept
@@ -295,7 +301,7 @@ class KrylovMemory:
         where its force was not 0: that product is paid for."""
         if not np.any(x):
             return np.zeros(len(x))
-        if schur is self.owner and self.last is not None and np.array_equal(x, self.last[0]):
+        if self._owns(schur) and self.last is not None and np.array_equal(x, self.last[0]):
             return self.last[1].copy()
         return schur.apply(x)
 
@@ -317,7 +323,7 @@ class KrylovMemory:
         the remembered directions that vanish off them, A-orthonormal; S V at all points, as an operator mu -> S V mu
         (:class:`_Products`: the remembered products combined, never formed as a matrix). Empty without any."""
         U = np.nonzero(unknown)[0]
-        keep = [j for j, on in enumerate(self.support) if unknown[on].all()] if schur is self.owner else []
+        keep = [j for j, on in enumerate(self.support) if unknown[on].all()] if self._owns(schur) else []
         keep = keep[-3 * U.size:]  # (more than |U| directions on |U| points are dependent: the latest few)
         if not keep:
             return np.zeros((U.size, 0)), np.zeros((U.size, 0)), np.zeros((len(unknown), 0))

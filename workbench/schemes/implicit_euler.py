@@ -42,7 +42,7 @@ import numpy as np
 from ..discrete import solvers
 from ..discrete.condensation import CondensedNewton, CondensedSystem, ContactOperator, CoupledNewton, SchurOperator
 from ..physics.ops import NP
-from .base import ErrorControlled
+from .base import ErrorControlled, make_room
 from .halfspace import HalfSpace
 from .model_a import KelvinVoigtScheme, kink_event
 
@@ -63,7 +63,8 @@ class ImplicitEuler(ErrorControlled, KelvinVoigtScheme):
     beta_tol = 1e-9  # coupling tolerance on beta (far below the O(k) error)
     #: factored operators kept (per a0): 16 on small meshes (measured on the slab of issue 11, adaptive BDF2 at
     #: rtol 1e-3: 173 factorisations in 314 solves with 4, 89 with 16), 4 from 20000 dofs on (memory: each holds a
-    #: sparse factor and the dense condensed matrix)
+    #: sparse factor and the dense condensed matrix), and never more than fit FACTOR_BYTES together
+    #: (:func:`~workbench.discrete.solvers.factors_kept`: one where each is large)
     cache_size = 16
     cache_size_large = 4
 
@@ -86,6 +87,7 @@ class ImplicitEuler(ErrorControlled, KelvinVoigtScheme):
         self.contact = size > 0
         self.exchange.bind(self.op.C if self.op is not None else ())
         self.method = d.step_solver()
+        self.cache_size = solvers.factors_kept(d.dim, d.ndof_global, self.method, self.cache_size)
         self.coupled = self.contact and d.numerics.coupled_contact(size, self.method, solvers.forms_schur(self.method))
         self.bonding = d.model.bonding
         self._factors = OrderedDict()
@@ -129,6 +131,8 @@ class ImplicitEuler(ErrorControlled, KelvinVoigtScheme):
         key = self._key(a0)
         entry = self._factors.get(key)
         if not isinstance(entry, tuple):
+            make_room(self._factors, self.cache_size, key)
+            self.M = self.solver = self.newton = self.split = None  # (freed with their operator, if dropped)
             built_from = a0 if entry is None else entry
             M = d.viscous.mat.CreateMatrix()
             M.AsVector().data = built_from * d.viscous.mat.AsVector() + d.elastic.mat.AsVector()
@@ -137,8 +141,6 @@ class ImplicitEuler(ErrorControlled, KelvinVoigtScheme):
             newton = self.exchange.run(lambda: self._newton(solver, diagonal), solver) if self.contact else None
             split = solver.split(self.op.C) if self.op is not None and not self.coupled else None
             self._factors[key] = (M, solver, newton, built_from, split)
-            while len(self._factors) > self.cache_size:
-                self._factors.popitem(last=False)
         self._factors.move_to_end(key)
         self.M, self.solver, self.newton, _, self.split = self._factors[key]
         self.resolved = self.bonding is None or self.bonding.resolved(k, d.model.beta0)

@@ -72,7 +72,7 @@ from ..discrete import solvers
 from ..discrete.condensation import CondensedSystem, SchurOperator
 from ..input.numerics import COUPLED_FROM_SCHUR
 from ..physics import unilateral
-from .base import ErrorControlled, Observer, Scheme, first_event
+from .base import ErrorControlled, Observer, Scheme, first_event, make_room
 from .contact_nodes import ContactNodes
 from .coupled_contact import CoupledActiveSet, condensed_up_to
 from .memory_rules import rule_for
@@ -82,7 +82,7 @@ class MemoryVI(ErrorControlled, Scheme):
     """One variational inequality per step, memory by recursion or quadrature, left rectangle or trapezoid."""
 
     name = "vi"
-    cache_size = 4
+    cache_size = 4  # (factored operators kept, by their weights; fewer where large: solvers.factors_kept)
     #: The memory's histories are dof vectors (each rank its part); the contact points' states and forces are held
     #: in the serial order where the contact problem is solved ("root").
     distributed_layout = {"histories": "dof", "stored": "dof", "states": "root", "lam": "root"}
@@ -106,6 +106,7 @@ class MemoryVI(ErrorControlled, Scheme):
         self.vertices_only = x.share(self.nodes.B is None if x.solves else None)  # (P1: s is u at the normal dofs)
         x.bind(self.nodes.C if x.solves else ())
         self.method = d.step_solver()
+        self.cache_size = solvers.factors_kept(d.dim, d.ndof_global, self.method, self.cache_size)
         self.coupled = None
         limit = condensed_up_to(d.ndof, self.method) if self.vertices_only and d.dim == 3 else COUPLED_FROM_SCHUR
         if d.numerics.coupled_contact(self.size, self.method, solvers.forms_schur(self.method), limit):
@@ -138,6 +139,8 @@ class MemoryVI(ErrorControlled, Scheme):
         weights = self.memory.implicit_weights(k) if self.memory is not None else []
         key = tuple(weights)
         if key not in self._operators:
+            make_room(self._operators, self.cache_size)
+            self.M = self.solver = self.S_inv = self.schur = self.split = None  # (freed with their operator)
             M = d.elastic.mat
             if any(weights):
                 M = d.elastic.mat.CreateMatrix()
@@ -161,10 +164,7 @@ class MemoryVI(ErrorControlled, Scheme):
                 rho = 100.0 / stiffness if nodes.size else np.zeros(0)
             split = solver.split(nodes.C) if S_inv is not None and x.solves and self.vertices_only else None
             self._operators[key] = [M, solver, S_inv, rho, schur, split]
-            while len(self._operators) > self.cache_size:
-                self._operators.popitem(last=False)
-        else:
-            self._operators.move_to_end(key)
+        self._operators.move_to_end(key)
         self.M, self.solver, self.S_inv, self.rho, self.schur, self.split = self._operators[key]
         self._weights = weights
 
