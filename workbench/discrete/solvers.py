@@ -244,7 +244,39 @@ class NGSolveDirect(Solver):
 
 
 
-class MixedPrecision(Solver):
+class _Iterative(Solver):
+    """What the iterative solvers share: the free block of K, warm starts from ``out``, iteration counts, and the
+    solution written back with zeros on the held dofs."""
+
+    warm_start = iterative = True  # (the scheme puts its first guess in ``out``)
+
+    def __init__(self, K: sp.spmatrix, free: np.ndarray, block=None):
+        self.free = free
+        self.matrix = free_block(K, free) if block is None else block
+        self.fixed = np.setdiff1d(np.arange(K.shape[0]), free)
+        self.iterations = self.solves = 0  # summed over the solves
+        self.last_iterations = 0
+
+    def _start(self, rhs: np.ndarray, out: np.ndarray):
+        """(the load on the free dofs, the first guess there: ``out``'s, or None where it is not finite)."""
+        x = out[self.free]
+        return rhs[self.free], (x if np.all(np.isfinite(x)) else None)
+
+    def _finish(self, b: np.ndarray, x: np.ndarray, count: int, out: np.ndarray, converged: bool, what: str) -> None:
+        """Counts the solve; writes x into ``out``, or raises Diverged naming ``what`` where it did not converge."""
+        self.last_iterations = count
+        self.iterations += count
+        self.solves += 1
+        if not converged:
+            from ..errors import Diverged
+
+            residual = float(np.linalg.norm(b - self.matrix @ x) / max(np.linalg.norm(b), 1e-300))
+            raise Diverged(f"the {what} did not converge: relative residual {residual:.2g} after {count} iterations")
+        out[self.fixed] = 0.0
+        out[self.free] = x
+
+
+class MixedPrecision(_Iterative):
     """Conjugate gradients on ``K[free][:, free]`` in double precision, preconditioned by MKL PARDISO's Cholesky
     factor of the same matrix in *single* precision (:class:`pardiso.Factor` with ``single``), to a relative residual
     of :data:`MIXED_TOL` (the true residual at most :data:`CG_TOL`, or at round-off): a factor in half the memory of
@@ -266,23 +298,16 @@ class MixedPrecision(Solver):
     """
 
     name = "mixed"
-    warm_start = iterative = True  # (the scheme puts its first guess in ``out``)
 
     def __init__(self, K: sp.spmatrix, free: np.ndarray, block=None):
-        self.free = free
-        self.matrix = free_block(K, free) if block is None else block
-        self.fixed = np.setdiff1d(np.arange(K.shape[0]), free)
+        super().__init__(K, free, block)
         self._norm = float(abs(self.matrix).sum(axis=1).max()) if self.matrix.nnz else 0.0  # ||K||_inf (its copy of
         # |K| goes before the factor comes)
         self.factor = pardiso.Factor(self.matrix, single=True)
-        self.iterations = self.solves = 0  # summed over the solves
-        self.last_iterations = 0
 
     def solve(self, rhs: np.ndarray, out: np.ndarray) -> None:
-        b = rhs[self.free]
-        x = out[self.free]
-        if not np.all(np.isfinite(x)):
-            x = np.zeros_like(b)
+        b, x = self._start(rhs, out)
+        x = np.zeros_like(b) if x is None else x
         norm, count = float(np.linalg.norm(b)), 0
         # The recursion's residual is followed to MIXED_TOL, where the true one may stall above it at double
         # precision's floor (measured 3e-12 on the hemisphere for a load on 50 points, 1.2e-10 on the P2 block's
@@ -295,18 +320,8 @@ class MixedPrecision(Solver):
             count += self._iterate(x, r, MIXED_TOL * norm, MIXED_MAXITER)
         else:
             r = b - self.matrix @ x
-        self.last_iterations = count
-        self.iterations += count
-        self.solves += 1
-        if not self._solved(r, x, norm):
-            from ..errors import Diverged
-
-            relative = float(np.linalg.norm(r)) / max(norm, 1e-300)
-            raise Diverged(f"the mixed-precision solve (solver = 'mixed') did not converge: relative residual "
-                           f"{relative:.2g} after {count} iterations; solver = 'pardiso' (the double factor) or 'cg' "
-                           "solve without single precision")
-        out[self.fixed] = 0.0
-        out[self.free] = x
+        self._finish(b, x, count, out, self._solved(r, x, norm), "mixed-precision solve (solver = 'mixed'; "
+                     "'pardiso', the double factor, or 'cg' solve without single precision)")
 
     def _solved(self, r: np.ndarray, x: np.ndarray, norm: float) -> bool:
         """Whether the residual r of x is below CG_TOL relative to the load's norm, or at double precision's round-off:
@@ -335,7 +350,7 @@ class MixedPrecision(Solver):
         return limit
 
 
-class AMGConjugateGradient(Solver):
+class AMGConjugateGradient(_Iterative):
     """CG on ``K[free][:, free]`` with a smoothed-aggregation AMG preconditioner (pyamg) built on the near-null space
     ``modes`` (n x m), warm started from ``out`` (module docs).
 
@@ -347,30 +362,22 @@ class AMGConjugateGradient(Solver):
     """
 
     name = "cg"
-    warm_start = iterative = True  # (the scheme puts its first guess in ``out``)
 
     def __init__(self, K: sp.spmatrix, free: np.ndarray, modes: np.ndarray):
         import pyamg
 
-        self.free = free
-        self.matrix = free_block(K, free)
-        self.fixed = np.setdiff1d(np.arange(K.shape[0]), free)
+        super().__init__(K, free)
         # theta = 0: every connection strong (elasticity's couplings are all of one order); a coarse level of up to
         # 2000 unknowns is solved by a sparse LU (the default pseudo-inverse took 65 s at 271k dofs)
         self.amg = pyamg.smoothed_aggregation_solver(self.matrix, B=np.ascontiguousarray(modes[free]), symmetry="hermitian",
                                                      strength=("symmetric", {"theta": 0.0}), max_coarse=2000,
                                                      coarse_solver="splu")
         self.preconditioner = self.amg.aspreconditioner(cycle="V")
-        self.iterations = self.solves = 0  # summed over the solves
-        self.last_iterations = 0
 
     def solve(self, rhs: np.ndarray, out: np.ndarray) -> None:
         from scipy.sparse.linalg import cg
 
-        b = rhs[self.free]
-        x0 = out[self.free]
-        if not np.all(np.isfinite(x0)):
-            x0 = None
+        b, x0 = self._start(rhs, out)
         count = [0]
 
         def counted(_):
@@ -379,17 +386,7 @@ class AMGConjugateGradient(Solver):
         # SciPy's CG stops on the true residual, ||b - K x||_2 <= CG_TOL ||b||_2 (pyamg's own on the preconditioned
         # one, which let the true residual lie 3x above the tolerance)
         x, info = cg(self.matrix, b, x0=x0, rtol=CG_TOL, atol=0.0, maxiter=1000, M=self.preconditioner, callback=counted)
-        self.last_iterations = count[0]
-        self.iterations += count[0]
-        self.solves += 1
-        if info != 0:
-            from ..errors import Diverged
-
-            residual = float(np.linalg.norm(b - self.matrix @ x) / max(np.linalg.norm(b), 1e-300))
-            raise Diverged(f"the conjugate gradient solve (solver = 'cg') did not converge: relative residual "
-                           f"{residual:.2g} after {count[0]} iterations")
-        out[self.fixed] = 0.0
-        out[self.free] = x
+        self._finish(b, x, count[0], out, info == 0, "conjugate gradient solve (solver = 'cg')")
 
 
 def rigid_body_modes(fes) -> np.ndarray:
