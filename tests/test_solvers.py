@@ -159,6 +159,27 @@ def test_mixed_precision_solves_to_the_double_factor():
         assert mixed.last_iterations <= 6 and np.abs(y - x).max() < 1e-9 * np.abs(x).max()
 
 
+@pytest.mark.skipif(not pardiso.available(), reason="needs MKL")
+def test_mixed_preconditions_the_coupled_solve_by_the_compliance_of_its_own_factorization(monkeypatch):
+    """With solver = 'mixed', the single factorization keeps the contact dofs last, and their Schur complement, in
+    single precision, gives S approximately: the coupled solve's conjugate gradients take it as preconditioner
+    (memory_block at h = 0.1: 84 iterations against 346 with the diagonal; at h = 0.05 126 against 758, and 239
+    back-substitutions against 916; the hemisphere at h_contact = 0.01, 13 against 54). The displacements agree with
+    the condensed solver on the double factor to 1e-9 (measured 7e-11)."""
+    from workbench.discrete import condensation
+
+    kw = dict(h=0.1, T=0.4, k=0.1, progress=False)
+    exact = workbench.run("memory_block", solver="pardiso", contact_solver="condensed", **kw)
+    runs = {}
+    for preconditioned in (True, False):
+        if not preconditioned:
+            monkeypatch.setattr(condensation.SchurOperator, "preconditioner", lambda self, U, D: None)
+        runs[preconditioned] = ds = workbench.run("memory_block", solver="mixed", contact_solver="coupled", **kw)
+        assert ds.attrs["linear_solver"] == "mixed"
+        assert np.abs(ds.u_probe - exact.u_probe).max() < 1e-9 * np.abs(exact.u_probe).max()
+    assert runs[True].linear_iterations.sum() < 0.5 * runs[False].linear_iterations.sum()
+
+
 @pytest.mark.parametrize("name, kw", [("memory_block", dict(T=0.2, k=0.1)), ("block", dict(scheme="bdf2", T=0.03,
                                                                                              k=0.01))])
 def test_auto_takes_mixed_where_only_the_single_factor_fits(monkeypatch, name, kw):

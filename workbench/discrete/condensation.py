@@ -132,14 +132,37 @@ class SchurOperator:
     (0.8, [2.0])
     """
 
-    def __init__(self, solver, ndof: int, C: np.ndarray, sign: float = 1.0, diagonal=None, B=None):
+    def __init__(self, solver, ndof: int, C: np.ndarray, sign: float = 1.0, diagonal=None, B=None,
+                 approximate: bool = False):
         self.solver, self.ndof, self.C, self.sign, self.B = solver, ndof, C, sign, B
-        self.stiffness = None
+        # ``approximate``: S itself, approximately and densely, where the solver forms it at little cost (solver =
+        # 'mixed': from its single factorization, before any solve), else None (:meth:`preconditioner`)
+        self.compliance = solver.approximate_compliance(C) if approximate and B is None else None
+        if self.compliance is not None:
+            signs = np.broadcast_to(np.asarray(sign, dtype=float), (C.size,))
+            self.compliance *= np.outer(signs, signs)
+        self.stiffness, self._dense = None, None
         if diagonal is not None:
             inverse = 1.0 / np.where(diagonal > 0, diagonal, np.inf)
             self.stiffness = 1.0 / (inverse[C] if B is None else B.multiply(B) @ inverse)
         self._rhs, self._out = np.zeros(ndof), np.zeros(ndof)
         self.applications = 0
+
+    def preconditioner(self, U: np.ndarray, D: np.ndarray):
+        """r -> (S~_UU + diag(D_U))^-1 r from the approximate compliance S~ (its Cholesky factor kept for the last U
+        and D), or None without one, or should that matrix not be positive definite."""
+        if self.compliance is None:
+            return None
+        key = (U.tobytes(), D.tobytes())
+        if self._dense is None or self._dense[0] != key:
+            A = self.compliance[np.ix_(U, U)]
+            A[np.diag_indices_from(A)] += D
+            try:
+                factor = la.cho_factor(A, overwrite_a=True, check_finite=False)
+            except la.LinAlgError:
+                return None
+            self._dense = (key, lambda r: la.cho_solve(factor, r, check_finite=False))
+        return self._dense[1]
 
     def apply(self, x: np.ndarray) -> np.ndarray:
         """S x for forces x at the points: the points' normal displacement under them."""

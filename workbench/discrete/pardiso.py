@@ -160,8 +160,6 @@ class Factor:
     def __init__(self, A: sp.spmatrix, keep=None, single: bool = False):
         if not available():
             raise RuntimeError("MKL PARDISO is not available here (install the 'mkl' wheel)")
-        if single and keep is not None:
-            raise ValueError("a factor in single precision keeps no unknowns (PARDISO's Schur complement is double)")
         self.n = A.shape[0]
         self.keep = None if keep is None else np.unique(np.asarray(keep, dtype=np.int64))
         self._matrix = _upper(A)
@@ -178,7 +176,7 @@ class Factor:
             self._iparm[35] = 2  # the Schur complement, and the factor of the other unknowns kept for solves in parts
             self._perm = np.zeros(self.n, dtype=np.int64)
             self._perm[self.keep] = 1
-            self.schur = out = np.zeros((self.keep.size, self.keep.size))
+            self.schur = out = np.zeros((self.keep.size, self.keep.size), dtype=self._dtype)
         _call(self._pt, SPD, 12, self.n, self._matrix, self._iparm, np.zeros(1, self._dtype), out, 1, self._perm)
         self.nonzeros = int(self._iparm[17])
         weakref.finalize(self, _release, self._pt, SPD, self.n, self._iparm)

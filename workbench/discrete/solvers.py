@@ -81,6 +81,11 @@ class Solver:
         """Solves in two parts around the dofs C (:class:`SplitSolve`), where the factor keeps C last; else None."""
         return None
 
+    def approximate_compliance(self, C: np.ndarray):
+        """(K^-1)_CC for dofs C, dense and approximate (a preconditioner's), where this solver forms it at little
+        cost; else None."""
+        return None
+
 
 def to_scipy(mat) -> sp.csr_matrix:
     """An NGSolve sparse matrix as SciPy CSR (the full matrix, also for symmetric storage)."""
@@ -290,6 +295,9 @@ class MixedPrecision(_Iterative):
     :data:`FACTOR_BYTES` and the single one would not (:func:`choose`). Rounding in single precision makes the
     preconditioner not quite linear, so the search directions are conjugated by Polak-Ribiere's formula (flexible
     CG, Notay, SISC 22 (2000)), which is the usual one where it is; the residual checked at the end is the true one.
+    Asked first, the factorization keeps the contact dofs last and gives their compliance in single precision
+    (:meth:`approximate_compliance`): Model B's coupled contact solve takes it as preconditioner (memory_block at 267k
+    dofs: 99 back-substitutions against 392, 125 s against 337 s).
 
     >>> K = sp.diags([-1.0, 2.0, -1.0], [-1, 0, 1], shape=(5, 5)).tocsr()
     >>> s = MixedPrecision(K, np.arange(1, 5)) if pardiso.available() else BandedCholesky(K, np.arange(1, 5))
@@ -299,11 +307,34 @@ class MixedPrecision(_Iterative):
 
     name = "mixed"
 
+    #: The most contact dofs whose compliance :meth:`approximate_compliance` forms (a dense matrix, 8 m^2 bytes).
+    compliance_up_to = 4000
+
     def __init__(self, K: sp.spmatrix, free: np.ndarray, block=None):
         super().__init__(K, free, block)
         self._norm = float(abs(self.matrix).sum(axis=1).max()) if self.matrix.nnz else 0.0  # ||K||_inf (its copy of
         # |K| goes before the factor comes)
-        self.factor = pardiso.Factor(self.matrix, single=True)
+        self._factor = None  # (made at the first use: a compliance asked first is formed inside it)
+
+    @property
+    def factor(self) -> pardiso.Factor:
+        if self._factor is None:
+            self._factor = pardiso.Factor(self.matrix, single=True)
+        return self._factor
+
+    def approximate_compliance(self, C: np.ndarray):
+        """(K^-1)_CC in single precision's accuracy, from the Schur complement of the free block on C that PARDISO
+        forms inside this solver's single factorization (asked before any solve, and for at most
+        :attr:`compliance_up_to` free dofs C); else None. It preconditions the coupled contact solve."""
+        at = np.searchsorted(self.free, C)
+        if self._factor is not None or not 0 < C.size <= self.compliance_up_to or C.size >= self.free.size:
+            return None
+        if np.any(at >= self.free.size) or np.any(self.free[at] != C) or np.unique(C).size != C.size:
+            return None  # (a held or repeated dof)
+        self._factor = pardiso.Factor(self.matrix, keep=at, single=True)
+        order = np.searchsorted(self._factor.keep, at)
+        stiffness = self._factor.schur[np.ix_(order, order)].astype(float)
+        return la.cho_solve(la.cho_factor(stiffness, check_finite=False), np.eye(C.size), check_finite=False)
 
     def solve(self, rhs: np.ndarray, out: np.ndarray) -> None:
         b, x = self._start(rhs, out)

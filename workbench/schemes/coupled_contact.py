@@ -202,8 +202,8 @@ class CoupledActiveSet:
         if np.abs(r).max() <= tol and np.abs(b - S_x[U] - D * x[U]).max() <= tol:
             return x, S_x  # (solved already: no preconditioner to build)
         diagonal = 1.0 / (1.0 / schur.stiffness[U] + D)
-        precondition = None
-        if self.halfspace is not None:  # (the model's scale as the prediction's: their factors are shared)
+        precondition = schur.preconditioner(U, D)  # (S itself, approximately, where the solver formed it)
+        if precondition is None and self.halfspace is not None:  # (the model's scale as the prediction's)
             c = self.halfspace.scale(np.arange(w), 1.0 / schur.stiffness)
             precondition = self.halfspace.preconditioner(U, D, c)
         precondition = precondition or (lambda r: diagonal * r)

@@ -152,7 +152,7 @@ class MemoryVI(ErrorControlled, Scheme):
             x, nodes, schur, S_inv, rho = self.exchange, self.nodes, None, None, None
             if self.coupled is not None:
                 diagonal = x.diagonal(M)
-                schur = SchurOperator(x.proxy(solver), x.view.ndof, nodes.C, nodes.sign, diagonal, nodes.B) \
+                schur = SchurOperator(x.proxy(solver), x.view.ndof, nodes.C, nodes.sign, diagonal, nodes.B, True) \
                     if x.solves else None
             else:
                 S_inv = x.run(lambda: self._condense(solver), solver)
