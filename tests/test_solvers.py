@@ -236,7 +236,7 @@ def test_a_scheme_frees_the_factor_it_drops_before_it_factors_the_next(monkeypat
     and drops the least recently used one, with its own references to it, before it factors the next: BDF2 factors
     its backward-Euler start and then its own operator, Model B's vi (trapezoid rule) the operator of u(0) and then the
     steps'. With one kept, no earlier factor is alive when the next is made (measured: BDF2 on the P2 block at 271k
-    dofs peaked at 5.67 GB holding both, 3.57 GB now); with the default cache one is. The coupled solver's remembered
+    dofs peaked at 5.67 GB holding both, 3.36 GB now); with the default cache one is. The coupled solver's remembered
     products hold their operator weakly, so they keep no dropped factor alive. The results are the same."""
     import weakref
 
