@@ -16,7 +16,7 @@ to a relative residual of :data:`CG_TOL`: no factor, so memory grows like the ma
 (the P2 block at 271k dofs, a whole explicit run: 2.1 GB peak and 37 s setup against 5.1 GB and 115 s with
 NGSolve's sparse factor; 7.9 s a step against 2.1 s; `studies/bench_3d_solver.py`).
 ``mixed``: conjugate gradients in double precision on PARDISO's factor in single precision (:class:`MixedPrecision`:
-half the factor's memory, 3-4 iterations a solve).
+half the factor's memory, 4-5 iterations a solve).
 ``cg`` and ``mixed`` serve the explicit scheme, and the implicit ones with the coupled contact solver (which needs
 products with K^-1 only); the condensed contact solver takes one solve per contact dof and wants a factor.
 ``auto`` takes ``banded`` when the ordered bandwidth is small against the size, else ``pardiso``, and, where an
@@ -288,10 +288,10 @@ class MixedPrecision(_Iterative):
     the double one, and a solve of a few iterations.
 
     Why. The single factor alone solves to about 10^-3 on a stiffness matrix, but as a preconditioner it leaves the
-    conjugate gradients a spectrum within about 10^-3 of 1, so each iteration gains about three digits: measured
-    (one thread) on the hemisphere at 46k free dofs 3 iterations to 10^-11-10^-14, and on the P1 block at 207k, 4
-    iterations to 10^-12-10^-13 (0.37 s a solve, against 0.19 s for the double factor and 2.5-3.7 s for ``cg``),
-    the factor in 11.5 s against 20.3 s. ``auto`` takes it where the double factor would exceed
+    conjugate gradients a spectrum within about 10^-3 of 1, so each iteration gains about three digits. Measured
+    (one thread, a random load, from 0): on the hemisphere at 47k dofs 4 iterations, 0.085 s a solve against 0.028 s
+    for the double factor; on the P1 block at 209k, 5 iterations, 0.74 s against 0.24 s (and 2.5-3.7 s for ``cg``),
+    the factor and a first solve in 14.2 s against 23.0 s (docs/schemes.md gives the command). ``auto`` takes it where the double factor would exceed
     :data:`FACTOR_BYTES` and the single one would not (:func:`choose`). Rounding in single precision makes the
     preconditioner not quite linear, so the search directions are conjugated by Polak-Ribiere's formula (flexible
     CG, Notay, SISC 22 (2000)), which is the usual one where it is; the residual checked at the end is the true one.
@@ -478,7 +478,7 @@ FACTOR_BYTES = 2.0e9
 #: Relative residual ||b - K x|| / ||b|| at which ``cg`` stops.
 CG_TOL = 1e-10
 #: Relative residual at which ``mixed`` stops (each iteration gains about three digits, so it affords a tighter one
-#: than ``cg``), and the most iterations it may take (measured: 3-4).
+#: than ``cg``), and the most iterations it may take (measured: 4-5).
 MIXED_TOL, MIXED_MAXITER = 1e-12, 30
 #: The most iterations a conjugate gradient solve on several processes may take (BDDC: 2-10 on the boxes).
 CG_MAXITER = 500
@@ -535,7 +535,7 @@ def choose(method: str, dim: int, ndof: int, iterative: bool) -> str:
     (``iterative``): ``mixed`` (:class:`MixedPrecision`) where PARDISO's factor in single precision would not, else
     ``cg``. Otherwise ``auto`` (banded or sparse, decided on the matrix by :func:`factor`).
 
-    Why ``mixed`` first: on the P1 block at 207k dofs its solve took 0.37 s against 2.5-3.7 s for ``cg``'s, for a
+    Why ``mixed`` first: on the P1 block at 209k dofs its solve took 0.74 s against 2.5-3.7 s for ``cg``'s, for a
     factor of 0.8 GB (:class:`MixedPrecision`); it covers about 1.7 x the dofs the double factor does.
 
     >>> choose("auto", 3, 300_000, False), choose("auto", 2, 10**6, True), choose("auto", 3, 700_000, True)

@@ -86,7 +86,7 @@ _TABLE: dict[str, Param] = {p.name: p for p in [
        "flag"),
     _p("solver", "auto", "", "linear solver for the constant matrix: banded Cholesky (RCM order), MKL's pardiso "
        "(a supernodal Cholesky, where the mkl wheel is installed), NGSolve's sparsecholesky or umfpack, mixed "
-       "(conjugate gradients on pardiso's factor in single precision: half its memory, 3-4 iterations a solve), or cg "
+       "(conjugate gradients on pardiso's factor in single precision: half its memory, 4-5 iterations a solve), or cg "
        "(AMG-preconditioned conjugate gradients, no factor); mixed and cg: the explicit scheme, and the implicit ones "
        "with the coupled contact solver; auto = banded when the bandwidth is small, else pardiso (sparsecholesky "
        "without MKL), and in 3D where a sparse factor would exceed 2 GB mixed, or cg where even the single one would "

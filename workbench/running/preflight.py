@@ -59,11 +59,11 @@ def estimate(geometry, order: int, solver: str = "auto", iterative: bool = False
         banded = 8.0 * ndof * width
         dissection = 8.0 * 30.0 * ndof * max(1.0, math.log2(ndof))
         factor = min(banded, dissection)
-    else:
-        taken = choose(solver, dim, ndof, iterative)  # (the factor auto or the given solver takes, with its work)
+    taken = choose(solver, dim, ndof, iterative)  # (the solver auto or the given one takes)
+    if dim == 3:  # (its factor, with its work)
         factor = sparse_factor_bytes(dim, ndof, taken) * (PARDISO_WORK if factor_kind(taken) == "pardiso" else 1.0)
     matrices = 8.0 * 3 * ndof * (9 * order ** dim) * dim  # K_A, K_G (and M): about 9 p^d dim entries per row
-    if choose(solver, dim, ndof, iterative) == "cg":
+    if taken == "cg":
         factor = 1.5 * matrices  # SciPy's copy of K_A, the AMG levels, CG's vectors (a run at 271k dofs: 2.1 GB peak)
     return Estimate(int(ndof), factor + matrices)
 
