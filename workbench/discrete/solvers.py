@@ -365,12 +365,15 @@ class MixedPrecision(_Iterative):
     def _iterate(self, x: np.ndarray, r: np.ndarray, target: float, limit: int) -> int:
         """Flexible PCG from x (updated in place) and its residual r until the recursion's residual is at most
         ``target``; returns the iterations."""
-        K, precondition = self.matrix, self.factor.solve
+        K, precondition = self.matrix, self._precondition
         z = precondition(r)
         p, rz = z.copy(), float(r @ z)
         for count in range(1, limit + 1):
             q = K @ p
-            a = rz / float(p @ q)
+            pq = float(p @ q)
+            if not pq > 0.0:  # (p = 0: the residual is 0 in single precision's view; the caller checks the true one)
+                return count - 1
+            a = rz / pq
             x += a * p
             r_old, r = r, r - a * q
             if float(np.linalg.norm(r)) <= target:
@@ -379,6 +382,14 @@ class MixedPrecision(_Iterative):
             rz, beta = float(r @ z), float(z @ (r - r_old)) / rz  # (Polak-Ribiere: flexible)
             p = z + beta * p
         return limit
+
+
+    def _precondition(self, r: np.ndarray) -> np.ndarray:
+        """The single factor's solve of r scaled to a largest entry of 1: single precision's range is 1e-38-3e38,
+        and a residual below it, as a Newton correction's of 1e-26 is after 12 digits gained, would vanish (the
+        slab's BDF2 under error control divided by that zero)."""
+        scale = float(np.abs(r).max())
+        return scale * self.factor.solve(r / scale) if scale > 0.0 else np.zeros_like(r)
 
 
 class AMGConjugateGradient(_Iterative):
