@@ -10,11 +10,13 @@ the hemisphere's K twice with NGSolve (the faster kept), then times ``workbench.
 taken, back-substitutions and conjugate gradient iterations, the assembly of K, the factorization, the run, their
 ratio, and the process's peak memory; ``per_step``: the time loop's wall time less PARDISO's factorizations inside
 it (timed in the run), over its steps, and ``slope`` its least-squares slope against the dofs in log-log. Writes
-``hertz_ratio.csv`` (about 5 minutes at the default levels; the last, 193k dofs, takes 3 of them and 3 GB). ``--compare``: each level also without the zone predicted on the half-space
-model (``CoupledActiveSet.predict = False``: the half-space preconditioner alone) and without the half-space at all
-(``HalfSpace.bounds = (0, 0)``: the diagonal preconditioner), in the same run (``preconditioner`` column).
-``--k K``: steps of K instead of the scene's 4 (``hertz_ratio_kK.csv``: a step's cost when each step moves the zone
-by less).
+``hertz_ratio.csv`` (about 10 minutes at the default levels; the last, 193k dofs, takes 6 of them and 3.3 GB).
+Each level runs twice: as ``auto`` takes it now (``candidates``: the condensed solver on the points of smallest
+gap first, :mod:`workbench.schemes.candidates`) and with the coupled solver alone (``half-space, predicted``, as
+before the candidates), in the ``preconditioner`` column. ``--compare``: also without the zone predicted on the
+half-space model (``CoupledActiveSet.predict = False``: the half-space preconditioner alone) and without the
+half-space at all (``HalfSpace.bounds = (0, 0)``: the diagonal preconditioner). ``--k K``: steps of K instead of the
+scene's 4 (``hertz_ratio_kK.csv``: a step's cost when each step moves the zone by less).
 """
 from __future__ import annotations
 
@@ -34,12 +36,16 @@ sys.path.insert(0, "studies")
 from threadpoolctl import threadpool_limits
 import workbench
 from workbench.discrete import discretisation, pardiso, solvers
+from workbench.schemes.candidates import Candidates
 from workbench.schemes.coupled_contact import CoupledActiveSet, HalfSpace
+from workbench.schemes.memory_vi import MemoryVI
 hc, preconditioner = float(sys.argv[1]), sys.argv[2]
 step_k = dict(k=float(sys.argv[3])) if sys.argv[3] != "default" else {}
 if preconditioner == "diagonal":
     HalfSpace.bounds = (0, 0)
-CoupledActiveSet.predict = preconditioner == "half-space, predicted"
+if preconditioner != "candidates":  # (the coupled solver alone, as before the candidates)
+    Candidates.most = classmethod(lambda cls, ndof, method: 0)
+CoupledActiveSet.predict = preconditioner in ("candidates", "half-space, predicted")
 with threadpool_limits(1):
     times = []
     for _ in range(2):
@@ -51,29 +57,39 @@ with threadpool_limits(1):
         times.append((t1 - t0, time.perf_counter() - t1))
         del d
     assemble, factor = min(times, key=lambda t: t[1])
-    factoring = []  # (PARDISO's factorizations inside the run, timed: a step's cost is the loop's without them)
-    init = pardiso.Factor.__init__
+    factoring = []  # (PARDISO's factorizations inside the run, (start, duration): a step's cost is the loop's
+    # without those made in it; the candidates' factor is made in the setup, the coupled solver's at t = 0's solve)
+    init, start = pardiso.Factor.__init__, MemoryVI.start
+    loop = []
 
     def timed(self, *args, **kwargs):
         t = time.perf_counter()
         init(self, *args, **kwargs)
-        factoring.append(time.perf_counter() - t)
+        factoring.append((t, time.perf_counter() - t))
 
-    pardiso.Factor.__init__ = timed
+    def started(self, t0):
+        loop.append(time.perf_counter())
+        return start(self, t0)
+
+    pardiso.Factor.__init__, MemoryVI.start = timed, started
     t0 = time.perf_counter()
     ds = workbench.run("memory_hertz3d", h_contact=hc, progress=False, threads=1, **step_k)
     run = time.perf_counter() - t0
-    pardiso.Factor.__init__ = init
+    pardiso.Factor.__init__, MemoryVI.start = init, start
 steps = int(ds.attrs["nsteps"])
+in_loop = sum(t for at, t in factoring if at >= loop[0])
 print(json.dumps(dict(h_contact=hc, preconditioner=preconditioner, ndof=int(ds.attrs["ndof"]),
                       contact_vertices=int(ds.sizes["node"]),
                       contact_solver=ds.attrs["contact_solver_used"], linear_solver=ds.attrs["linear_solver"],
+                      candidates=int(ds.attrs["contact_candidates"]),
+                      candidates_missed=int(ds.attrs["contact_candidates_missed"]),
+                      in_contact=int(ds.n_rigid.values[-1] + ds.n_stuck.values[-1] + ds.n_compliant.values[-1]),
                       backsubs=int(ds.linear_solves.sum()),
                       cg_iterations=int(ds.linear_iterations.sum()) if "linear_iterations" in ds else 0,
                       assemble=round(assemble, 2), factor_sparsecholesky=round(factor, 2), run=round(run, 2),
                       ratio=round(run / factor, 2), loop=round(float(ds.attrs["wall_time"]), 2),
-                      factor_in_run=round(sum(factoring), 2),
-                      per_step=round((float(ds.attrs["wall_time"]) - sum(factoring)) / steps, 3),
+                      factor_in_run=round(sum(t for _, t in factoring), 2), factor_in_loop=round(in_loop, 2),
+                      per_step=round((float(ds.attrs["wall_time"]) - in_loop) / steps, 3),
                       peak_mb=round(resource.getrusage(resource.RUSAGE_SELF).ru_maxrss / 1024.0))))
 """
 
@@ -94,16 +110,18 @@ def main():
     args = p.parse_args()
     rows = []
     for hc in args.levels:
-        variants = ("half-space, predicted", "half-space", "diagonal")
-        for preconditioner in variants if args.compare else variants[:1]:
+        variants = ("candidates", "half-space, predicted", "half-space", "diagonal")
+        for preconditioner in variants if args.compare else variants[:2]:
             rows.append(one(hc, preconditioner, args.k))
             print(rows[-1], flush=True)
-    predicted = [r for r in rows if r["preconditioner"] == "half-space, predicted"]
-    if len(predicted) > 1:  # (issue 22: a step's cost against the dofs, slope <= 1.2 in log-log)
-        fit = np.polyfit(np.log([r["ndof"] for r in predicted]), np.log([r["per_step"] for r in predicted]), 1)[0]
-        for r in predicted:
-            r["slope"] = round(float(fit), 3)
-        print("slope of a step's cost (the loop without its factorizations) against the dofs:", round(float(fit), 3))
+    for variant in dict.fromkeys(r["preconditioner"] for r in rows):
+        same = [r for r in rows if r["preconditioner"] == variant]
+        if len(same) > 1:  # (issue 22: a step's cost against the dofs, slope <= 1.2 in log-log)
+            fit = np.polyfit(np.log([r["ndof"] for r in same]), np.log([r["per_step"] for r in same]), 1)[0]
+            for r in same:
+                r["slope"] = round(float(fit), 3)
+            print(f"{variant}: slope of a step's cost (the loop without its factorizations) against the dofs:",
+                  round(float(fit), 3))
     out = Path(args.out)
     out.mkdir(parents=True, exist_ok=True)
     name = "hertz_ratio.csv" if args.k is None else f"hertz_ratio_k{args.k:g}.csv"
@@ -111,11 +129,12 @@ def main():
         writer = csv.DictWriter(f, fieldnames=list(dict.fromkeys(k for r in rows for k in r)))
         writer.writeheader()
         writer.writerows(rows)
-    print("| h_contact | dofs | contact vertices | solver | preconditioner | back-substitutions (CG) | assemble K | "
-          "factor K | run | run / factor | peak |\n|" + "---|" * 11)
+    print("| h_contact | dofs | contact vertices (in contact) | solver | variant | candidates (missed) | "
+          "solves (CG) | assemble K | factor K | run | run / factor | peak |\n|" + "---|" * 12)
     for r in rows:
-        print(f"| {r['h_contact']} | {r['ndof']} | {r['contact_vertices']} | {r['contact_solver']}, "
-              f"{r['linear_solver']} | {r['preconditioner']} | {r['backsubs']} ({r['cg_iterations']}) | "
+        print(f"| {r['h_contact']} | {r['ndof']} | {r['contact_vertices']} ({r['in_contact']}) | "
+              f"{r['contact_solver']}, {r['linear_solver']} | {r['preconditioner']} | {r['candidates']} "
+              f"({r['candidates_missed']}) | {r['backsubs']} ({r['cg_iterations']}) | "
               f"{r['assemble']} s | "
               f"{r['factor_sparsecholesky']} s | {r['run']} s | {r['ratio']} x | {r['peak_mb']} MB |")
 

@@ -86,6 +86,11 @@ class Solver:
         cost; else None."""
         return None
 
+    def kept(self, C: np.ndarray):
+        """(the condensed stiffness on the dofs C, the solve in two parts around them), both from one factorization
+        that keeps C last, where this solver makes one (asked before any solve); else None, and no work done."""
+        return None
+
 
 def to_scipy(mat) -> sp.csr_matrix:
     """An NGSolve sparse matrix as SciPy CSR (the full matrix, also for symmetric storage)."""
@@ -198,6 +203,13 @@ class PardisoCholesky(_HoldsMatrix, Solver):
                 at = np.searchsorted(self._factor.keep, keep)
                 return self._factor.schur[np.ix_(at, at)]
         return super().condensed_stiffness(C, B)
+
+    def kept(self, C: np.ndarray):
+        if self._factor is not None or self._free_positions(C) is None:
+            return None
+        stiffness = self.condensed_stiffness(C)
+        split = self.split(C)
+        return None if split is None else (stiffness, split)
 
     def split(self, C: np.ndarray):
         """Solves in parts on the dofs C (:class:`SplitSolve`) where the factor keeps them last, else None."""

@@ -21,11 +21,15 @@ Examples
 """
 from __future__ import annotations
 
+import copy
+
 import numpy as np
+import scipy.linalg as la
 import scipy.sparse as sp
 
 from ..errors import NewtonFailed
 from ..physics import unilateral
+from .halfspace import state_system
 
 
 def scales_from(scales: tuple, last: float) -> tuple:
@@ -49,6 +53,10 @@ class ContactNodes:
     #: (gap 0.002, F = 5, c = 1e4, h_contact = 0.01) wandered for all 50 iterations of each step at rho and went to
     #: Gauss-Seidel (82.7 s of the 88.9 s run); at rho / 100 it settles.
     rho_scales, stall = (1.0, 0.01, 100.0), 10
+    #: The points' compliance, S_inv's inverse, where the caller has it (:class:`~workbench.schemes.candidates.
+    #: Candidates`): each state's system is then solved on the fewer unknowns, the positions (with S_inv) or the
+    #: forces (with it).
+    compliance = None
 
     def __init__(self, d):
         self.d, self.layer = d, d.model.layer
@@ -73,6 +81,16 @@ class ContactNodes:
     @property
     def size(self) -> int:
         return self.w.size
+
+    def subset(self, P: np.ndarray) -> "ContactNodes":
+        """These contact vertices restricted to the points P (P1), with their states and forces: a copy whose arrays
+        are P's (:class:`~workbench.schemes.candidates.Candidates` solves on it)."""
+        sub = copy.copy(self)
+        sub.active_nodes, sub.C, sub.w = self.active_nodes[P], self.C[P], self.w[P]
+        sub.g0 = None if self.g0 is None else self.g0[P]
+        sub.n_vertex_points = P.size
+        sub.states, sub.lam = self.states[P].copy(), self.lam[P].copy()
+        return sub
 
     def _quadratic_points(self) -> None:
         """P2 (2D): the constraint and the layer's law at the contact vertices and the facet midpoints (the nodes of
@@ -150,7 +168,7 @@ class ContactNodes:
         fewest, since = np.inf, 0  # (the fewest states changed in an iteration so far, and iterations since)
         for _ in range(self.max_iterations):
             total += 1
-            s, lam = layer.solve_states(S_inv, s_free, self.w, states)
+            s, lam = self._state_solution(S_inv, s_free, states)
             new = layer.state_of(s + rho_t * lam / self.w, rho_t)
             if np.array_equal(new, states):
                 self.states, self.lam = states, lam
@@ -163,6 +181,28 @@ class ContactNodes:
             seen.add(key)
             states = new
         return None, total
+
+    def _state_solution(self, S_inv, s_free, states):
+        """(s, lam) for fixed ``states``: by the points whose position is unknown (the separated and compliant ones)
+        and S_inv; or, with a :attr:`compliance` and fewer forces unknown than positions, by those forces. Where few
+        points touch, that system is the smaller (the hemisphere's candidates at 47k dofs: 463 forces against 1127
+        positions at the first load step)."""
+        S, layer = self.compliance, self.layer
+        if S is not None:
+            unknown, rhs, D, lam = state_system(layer, self.w, states, s_free)
+            U = np.flatnonzero(unknown)
+            if U.size < np.count_nonzero((states == unilateral.SEPARATED) | (states == unilateral.COMPLIANT)):
+                if U.size:
+                    A = S[np.ix_(U, U)]
+                    A[np.diag_indices_from(A)] += D[U]
+                    known = rhs[U] - S[U] @ lam if lam.any() else rhs[U]  # (lam: the forces known, c = 0)
+                    lam[U] = la.cho_solve(la.cho_factor(A, overwrite_a=True, check_finite=False), known,
+                                          check_finite=False)
+                s = s_free - S @ lam
+                s[states == unilateral.STUCK] = 0.0  # (exactly, as the positions' system has them)
+                s[states == unilateral.RIGID] = layer.g
+                return s, lam
+        return layer.solve_states(S_inv, s_free, self.w, states)
 
     def _gauss_seidel_states(self, S, rho_diag, s_free, u=None, sweeps=2000, tol=1e-13):
         """States of the condensed energy's minimiser by projected Gauss-Seidel (exact coordinate minimisation)."""
@@ -183,6 +223,21 @@ class ContactNodes:
                 break
         lam = S @ (s_free - s)
         return layer.state_of(s + rho_diag * lam, rho_diag * w)
+
+    def record(self, u: np.ndarray, counted, rho, linear_iterations=None) -> dict:
+        """A step's record: ``u`` the body's displacement (where the contact problem is solved), ``counted`` the
+        contact solve's iterations and back-substitutions besides them (None without contact points),
+        ``linear_iterations`` the coupled solver's conjugate gradient iterations (None: not recorded)."""
+        iterations, solves = counted or (0, 0)
+        counts = np.bincount(self.states, minlength=4)
+        out = {  # (the back-substitutions: z, the contact solve's, and u from the contact forces)
+            "iterations": iterations, "linear_solves": 1 + (solves + iterations + 1 if counted else 0),
+            "n_separated": int(counts[0]), "n_stuck": int(counts[1]), "n_compliant": int(counts[2]),
+            "n_rigid": int(counts[3]), "complementarity": self.complementarity(u, rho),
+        }
+        if linear_iterations is not None:
+            out["linear_iterations"] = linear_iterations
+        return out
 
     def kinks(self, u: np.ndarray, lam: np.ndarray) -> list:
         """Zeros where a contact point changes state, weighted by its share of the side: s = u_nu (separation),

@@ -73,6 +73,7 @@ from ..discrete.condensation import CondensedSystem, SchurOperator
 from ..input.numerics import COUPLED_FROM_SCHUR
 from ..physics import unilateral
 from .base import ErrorControlled, Observer, Scheme, first_event, make_room
+from .candidates import Candidates
 from .contact_nodes import ContactNodes
 from .coupled_contact import CoupledActiveSet, condensed_up_to
 from .memory_rules import rule_for
@@ -112,6 +113,8 @@ class MemoryVI(ErrorControlled, Scheme):
         if d.numerics.coupled_contact(self.size, self.method, solvers.forms_schur(self.method), limit):
             self.coupled = CoupledActiveSet(self.nodes, self.method, d.ndof, d.numerics.contact_tol) \
                 if x.solves else True
+        # (auto's coupled solver on a curved side: first the condensed one on the points of smallest gap)
+        self.candidates = Candidates.of(self.nodes, self.method) if self.coupled is not None and x.solves else None
         self.memory = rule_for(d, self.trapezoid)  # (None without memory)
         self._balance = None  # f - memory of the last equilibrium (only for the reaction of pinned contact nodes)
         self._operators = OrderedDict()
@@ -124,10 +127,12 @@ class MemoryVI(ErrorControlled, Scheme):
         self.u_prev = d.u.vec.FV().NumPy().copy()
         self.diag = {}
 
+    def used(self) -> dict:
+        return Candidates.attrs(self.candidates)
+
     def preflight(self, k_max: float) -> dict:
         """Records how a general kernel was approximated by exponentials (its terms and error bound)."""
-        memory = self.d.model.memory
-        fit = memory.fit if memory is not None else None
+        fit = self.d.model.memory.fit if self.d.model.memory is not None else None
         used = {"contact_solver_used": "coupled" if self.coupled is not None else "condensed",
                 "linear_solver": self.solver.name}
         return used if fit is None else used | {"kernel_terms": fit["terms"], "kernel_fit_error": fit["error"]}
@@ -140,7 +145,7 @@ class MemoryVI(ErrorControlled, Scheme):
         key = tuple(weights)
         if key not in self._operators:
             make_room(self._operators, self.cache_size)
-            self.M = self.solver = self.S_inv = self.schur = self.split = None  # (freed with their operator)
+            self.M = self.solver = self.S_inv = self.schur = self.split = self.kept = None  # (freed with theirs)
             M = d.elastic.mat
             if any(weights):
                 M = d.elastic.mat.CreateMatrix()
@@ -163,15 +168,16 @@ class MemoryVI(ErrorControlled, Scheme):
                 stiffness = schur.stiffness if schur is not None else np.diag(S_inv)
                 rho = 100.0 / stiffness if nodes.size else np.zeros(0)
             split = solver.split(nodes.C) if S_inv is not None and x.solves and self.vertices_only else None
-            self._operators[key] = [M, solver, S_inv, rho, schur, split]
+            kept = self.candidates.operator(solver) if self.candidates is not None else None
+            self._operators[key] = [M, solver, S_inv, rho, schur, split, kept]
         self._operators.move_to_end(key)
-        self.M, self.solver, self.S_inv, self.rho, self.schur, self.split = self._operators[key]
+        self.M, self.solver, self.S_inv, self.rho, self.schur, self.split, self.kept = self._operators[key]
         self._weights = weights
 
     def _condense(self, solver):
         """The dense contact stiffness S^-1 = (B K^-1 B^T)^-1, one back-substitution per contact point."""
-        x = self.exchange
-        return CondensedSystem(x.proxy(solver), x.view.ndof, self.nodes.C, B=self.nodes.B).S0_inv  # (P1: sign^2 = 1)
+        return CondensedSystem(self.exchange.proxy(solver), self.exchange.view.ndof, self.nodes.C,
+                               B=self.nodes.B).S0_inv  # (P1: sign^2 = 1)
 
     def _condensed_fallback(self):
         """(S_inv, rho) of the current operator for the condensed solver, built once (the coupled solve's fallback)."""
@@ -214,8 +220,8 @@ class MemoryVI(ErrorControlled, Scheme):
             d.lift(time, self.tmp.FV().NumPy())
             self.work.data = self.M * self.tmp
             self.rhs_np -= self.work.FV().NumPy()
-        if self.split is not None and self.size:
-            return self._split_equilibrium(u, time)
+        if self.size and (self.split or self.kept) is not None and self._split_equilibrium(u, time):
+            return
         self.solver.solve(self.rhs_np, self.z)
         if d.moves_clamp:
             self.z[d.dirichlet_dofs] = d.dirichlet_value(time)
@@ -231,18 +237,28 @@ class MemoryVI(ErrorControlled, Scheme):
             u[:] = self.z
         u_view = x.gather(u)
         if x.solves:
-            self.diag = self._diagnostics(u_view, found[2] if self.size else None)
+            linear = self.coupled.linear_iterations if self.coupled is not None else None
+            self.diag = self.nodes.record(u_view, found[2] if self.size else None, self.rho, linear)
 
-    def _split_equilibrium(self, u: np.ndarray, time: float) -> None:
-        """:meth:`_equilibrium` by one solve in two parts around the contact dofs (module docs; serial, P1)."""
+    def _split_equilibrium(self, u: np.ndarray, time: float) -> bool:
+        """:meth:`_equilibrium` by one solve in two parts around the contact dofs or the candidates (module docs;
+        serial, P1); False where a point beyond the candidates met the foundation (the coupled solver's step then)."""
         d, C = self.d, self.nodes.C
-        self.z[:] = 0.0
-        self.z[C] = self.split.free_displacement(self.rhs_np)  # (the contact problem reads z at C only)
-        _, fixed, (iterations, solves) = self._contact(self.z, time, u)
-        self.split.expand(fixed[C], u)  # (u on the Dirichlet dofs: 0, or the clamp's value set below)
+        if self.kept is not None:
+            iterations = self.candidates.equilibrium(self.kept, self.rhs_np, u, time)
+            if iterations is None:
+                return False
+            solves = 0
+        else:
+            self.z[:] = 0.0
+            self.z[C] = self.split.free_displacement(self.rhs_np)  # (the contact problem reads z at C only)
+            _, fixed, (iterations, solves) = self._contact(self.z, time, u)
+            self.split.expand(fixed[C], u)  # (u on the Dirichlet dofs: 0, or the clamp's value set below)
         if d.moves_clamp:
             u[d.dirichlet_dofs] = d.dirichlet_value(time)
-        self.diag = self._diagnostics(u, (iterations, solves - 1))  # (-1: no second back-substitution)
+        linear = 0 if self.coupled is not None else None  # (the coupled solver's CG: not used by these steps)
+        self.diag = self.nodes.record(u, (iterations, solves - 1), self.rho, linear)  # (-1: one solve for z and u)
+        return True
 
     def _contact(self, z: np.ndarray, time: float, start: np.ndarray):
         """Where the contact problem is solved, from the contact-free displacement ``z`` and the step's start ``start``
@@ -265,21 +281,6 @@ class MemoryVI(ErrorControlled, Scheme):
             fixed = np.zeros_like(z)
             fixed[nodes.C] = nodes.sign * s
         return nodes.force(lam, len(z)), fixed, (iterations, solves)
-
-    def _diagnostics(self, u: np.ndarray, counted) -> dict:
-        """The step's record (where the contact problem is solved; ``u`` a vector of the view; ``counted``: the
-        contact solve's iterations and back-substitutions besides them, None without contact points)."""
-        nodes = self.nodes
-        iterations, solves = counted or (0, 0)
-        counts = np.bincount(nodes.states, minlength=4)
-        out = {  # (the back-substitutions: z, the contact solve's, and u from the contact forces)
-            "iterations": iterations, "linear_solves": 1 + (solves + iterations + 1 if counted else 0),
-            "n_separated": int(counts[0]), "n_stuck": int(counts[1]), "n_compliant": int(counts[2]),
-            "n_rigid": int(counts[3]), "complementarity": nodes.complementarity(u, self.rho),
-        }
-        if self.coupled is not None:
-            out["linear_iterations"] = self.coupled.linear_iterations
-        return out
 
     def diagnostics(self) -> dict:
         return dict(self.diag)
