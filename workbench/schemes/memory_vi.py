@@ -47,6 +47,9 @@ Where the factor keeps the contact vertices' normal dofs last (MKL PARDISO, cond
 :class:`workbench.discrete.solvers.SplitSolve`), the two back-substitutions of a step become one solve in two
 parts: the forward part gives the condensed load there, hence z at the contact dofs; the active set runs; the
 backward part gives u from the contact dofs' values. The condensed stiffness comes out of that same factorization.
+Where ``auto`` took the coupled solver on a curved 3D side, the same is done on the points of smallest gap first,
+the others checked from the whole u (:mod:`.candidates`); a step where one of those others touches is the coupled
+solver's.
 
 Local error (:meth:`MemoryVI.local_error`): u_n solves the inequality at t_n exactly for its memory term, so the
 step's local error is that of the memory integral over [t_{n-1}, t_n] (an embedded pair, not a predictor: u of a
