@@ -44,7 +44,7 @@ step_k = dict(k=float(sys.argv[3])) if sys.argv[3] != "default" else {}
 if preconditioner == "diagonal":
     HalfSpace.bounds = (0, 0)
 if preconditioner != "candidates":  # (the coupled solver alone, as before the candidates)
-    Candidates.most = classmethod(lambda cls, ndof, method: 0)
+    Candidates.most = classmethod(lambda cls, ndof, method, steps: 0)
 CoupledActiveSet.predict = preconditioner in ("candidates", "half-space, predicted")
 with threadpool_limits(1):
     times = []

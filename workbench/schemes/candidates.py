@@ -14,9 +14,11 @@ Measured on the hemisphere from rest to the full load in 4 steps (docs/schemes.m
 dofs, with 5186 contact vertices and 1182 in contact at the end, the 1590 candidates cost the factorization about
 0.6 s more, and the run then took 5 solves in two parts and 29 dense active-set iterations, against 76
 back-substitutions (54 of them conjugate gradient iterations) and the half-space model's dense work: 4.89 s against
-6.48 s in one run of each (16 steps: 5.81 s against 14.85 s). Where the zone outgrows the candidates (the hemisphere
-at 106k and 193k dofs, in its last steps) their factorization's extra cost is paid for fewer cheap steps: 4 steps
-took 11 % less and 10 % more time than the coupled solver alone, 16 steps 50 % and 26 % less.
+6.48 s in one run of each. At 106k and 193k dofs the zone outgrows those 4 steps' candidates in the last steps, and
+their factorization's extra cost is paid for fewer cheap steps: 11 % less and 10 % more time than the coupled solver
+alone. A run of more steps affords more candidates (:meth:`Candidates.most`): in 16 steps they hold at all three
+sizes, the runs take 0.59, 0.56 and 0.41 of the coupled solver's time, and a step's cost grows with slope 1.18
+against the dofs (1.50 for the coupled solver).
 
 >>> import numpy as np
 >>> Candidates.choose(np.array([0.3, 0.0, 0.1, 0.1, 0.2]), 3).tolist()  # the smallest gaps, ties kept together
@@ -25,13 +27,15 @@ took 11 % less and 10 % more time than the coupled solver alone, 16 steps 50 % a
 [1]
 >>> Candidates.choose(np.zeros(5), 3) is None  # a flat side: the gaps do not tell which points touch first
 True
+>>> Candidates.choose(np.zeros(5), 5).tolist()  # (unless every point fits)
+[0, 1, 2, 3, 4]
 """
 from __future__ import annotations
 
 import numpy as np
-import scipy.linalg as la
 
 from ..physics.unilateral import SEPARATED
+from .contact_nodes import inverse
 from .halfspace import dense_points
 
 
@@ -57,9 +61,12 @@ class Candidates:
     @staticmethod
     def choose(g0, most: int):
         """The points of the ``most`` smallest gaps g0, without splitting a set of equal gaps (so no point left out
-        lies nearer than one kept), sorted; None where that leaves none or takes every point."""
-        if g0 is None or not 0 < most < len(g0):
+        lies nearer than one kept), sorted (every point where ``most`` allows, none checked then); None where that
+        leaves none."""
+        if g0 is None or most < 1 or len(g0) == 0:
             return None
+        if most >= len(g0):
+            return np.arange(len(g0))
         order = np.argsort(g0, kind="stable")
         first_out = g0[order[most]]
         P = np.sort(order[:most][g0[order[:most]] < first_out])
@@ -68,27 +75,36 @@ class Candidates:
     @classmethod
     def of(cls, nodes, method: str):
         """The candidates of ``nodes`` (3D contact vertices, ``contact_solver = "auto"``) for a factor ``method`` (at
-        most :meth:`most`), or None where their gaps do not rank them (module docs)."""
+        most :meth:`most` for the run's steps T / k, many under error control), or None where their gaps do not
+        rank them (module docs)."""
         d = nodes.d
         if d.dim != 3 or nodes.B is not None or d.numerics.contact_solver != "auto":
             return None
-        P = cls.choose(nodes.g0, cls.most(d.ndof, method))
+        n = d.numerics
+        steps = np.inf if n.adaptive else n.T / n.k  # (error control takes many steps, as a rule: the upper bound)
+        P = cls.choose(nodes.g0, cls.most(d.ndof, method, steps))
         return None if P is None else cls(nodes, P)
 
-    #: The candidates' dense work against the factor's: as many points as a dense Cholesky factor of this many
-    #: back-substitutions' cost (:func:`~workbench.schemes.halfspace.dense_points`).
-    backsubs = 1.0
+    #: As many candidates as a dense Cholesky factor of this many back-substitutions' cost
+    #: (:func:`~workbench.schemes.halfspace.dense_points`) per this many steps, within these bounds (:meth:`most`).
+    backsubs, steps_per_backsub = (1.0, 4.0), 4.0
 
     @classmethod
-    def most(cls, ndof: int, method: str) -> int:
-        """The most candidates for a factor ``method`` of ``ndof`` dofs. Keeping them last costs the factorization
-        more than their dense block's flops: measured on the hemisphere at 47k dofs (1.13 s without), 1.33, 1.47,
-        1.70 and 2.34 s for 500, 1000, 1500 and 2500 points.
+    def most(cls, ndof: int, method: str, steps: float) -> int:
+        """The most candidates for a factor ``method`` of ``ndof`` dofs and a run of about ``steps`` steps. Keeping
+        them last costs the factorization more than their dense block's flops (measured on the hemisphere at 47k
+        dofs, 1.13 s without, 1.33, 1.47, 1.70 and 2.34 s for 500, 1000, 1500 and 2500 points), once; a step they
+        hold costs a solve and dense work, where the coupled solver's takes about 20 back-substitutions. So a run of
+        more steps affords more of them, and more of them hold a larger zone: from one back-substitution's worth at
+        4 steps to four at 16 and more (docs/schemes.md, "The candidate points").
 
-        >>> [Candidates.most(n, "pardiso") for n in (11_865, 46_938, 193_464)]
+        >>> [Candidates.most(n, "pardiso", 4) for n in (11_865, 46_938, 193_464)]
         [863, 1590, 2985]
+        >>> Candidates.most(193_464, "pardiso", 16)
+        4738
         """
-        return dense_points(ndof, method, cls.backsubs)
+        least, largest = cls.backsubs
+        return dense_points(ndof, method, float(np.clip(steps / cls.steps_per_backsub, least, largest)))
 
     @staticmethod
     def attrs(candidates) -> dict:
@@ -137,24 +153,3 @@ class Candidates:
             return None
         return iterations
 
-
-def inverse(A: np.ndarray) -> np.ndarray:
-    """The inverse of the symmetric positive definite A from its Cholesky factor (LAPACK's potri: a third of the
-    work of solving with the identity; at 1590 points 0.12 s against 0.45 s).
-
-    >>> inverse(np.array([[2.0, 1.0], [1.0, 2.0]])).round(6).tolist()
-    [[0.666667, -0.333333], [-0.333333, 0.666667]]
-    """
-    potrf, potri = la.get_lapack_funcs(("potrf", "potri"), (A,))
-    factor, info = potrf(A, lower=True, clean=False, overwrite_a=False)
-    if info == 0:
-        factor, info = potri(factor, lower=True, overwrite_c=True)
-    if info != 0:
-        raise la.LinAlgError(f"the candidates' condensed stiffness is not positive definite (LAPACK info {info})")
-    n, block = len(factor), 256  # (the upper triangle from the lower one, a band of rows at a time: no n x n temporary)
-    for i in range(0, n, block):
-        factor[i:i + block, i + block:] = factor[i + block:, i:i + block].T
-        diagonal = factor[i:i + block, i:i + block]
-        upper = np.triu_indices(len(diagonal), 1)
-        diagonal[upper] = diagonal.T[upper]
-    return factor
