@@ -38,6 +38,7 @@ import scipy.sparse.linalg as spla
 from ..errors import NewtonFailed
 from ..physics.ops import NP
 from .boundary import contact_dofs
+from .solvers import inverse
 
 
 class ContactOperator:
@@ -112,7 +113,7 @@ class CondensedSystem:
                 R = B[start:start + chunk].T.toarray()
                 S0[:, start:start + R.shape[1]] = B @ solver.solve_many(R)
         S0 = 0.5 * (S0 + S0.T)
-        return la.cho_solve(la.cho_factor(S0), np.eye(m)) if m else S0
+        return inverse(S0) if m else S0
 
 
 class SchurOperator:

@@ -34,8 +34,8 @@ from __future__ import annotations
 
 import numpy as np
 
+from ..discrete.solvers import inverse
 from ..physics.unilateral import SEPARATED
-from .contact_nodes import inverse
 from .halfspace import dense_points
 
 
