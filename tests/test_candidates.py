@@ -8,6 +8,7 @@ import workbench
 from workbench.discrete import discretisation, pardiso
 from workbench.physics import unilateral
 from workbench.physics.unilateral import COMPLIANT, RIGID, SEPARATED, STUCK
+from workbench.schemes import candidates
 from workbench.schemes.candidates import Candidates
 from workbench.schemes.contact_nodes import ContactNodes
 
@@ -43,11 +44,26 @@ def test_the_candidates_solve_the_hemisphere_as_the_condensed_solver_with_a_frac
     assert auto.linear_solves.values.tolist() == (1 + auto.iterations.values).tolist()
 
 
-def test_a_zone_that_outgrows_the_candidates_is_handed_to_the_coupled_solver(monkeypatch):
-    """150 candidates hold the first load step's zone (115 points) and not the second's (181): that step is solved
-    again by the coupled solver, and so are the rest. The run still equals the condensed solver's, to the coupled
-    solver's tolerance (1e-7 of the pressures, as tests/test_coupled_contact.py has it; measured 1.3e-8)."""
+def test_a_zone_that_outgrows_the_candidates_is_solved_on_every_point(monkeypatch):
+    """150 candidates hold the first load step's zone (115 points) and not the second's (181). The 1290 points are
+    few enough for the condensed solver (twice its rule's 1245, with the smaller of its two systems), so that step's
+    factorization is made again keeping every point, and the run goes on condensed: equal to the condensed solver's
+    to 1e-9, with no conjugate gradient iteration."""
     monkeypatch.setattr(Candidates, "most", classmethod(lambda cls, ndof, method, steps: 150))
+    kw = dict(h_contact=0.01, progress=False)
+    auto = workbench.run("memory_hertz3d", **kw)
+    assert auto.attrs["contact_candidates"] == 1290 and auto.attrs["contact_candidates_missed"] == 0
+    assert auto.n_rigid.values.tolist() == [0, 115, 181, 239, 287] and int(auto.linear_iterations.sum()) == 0
+    _agree(auto, workbench.run("memory_hertz3d", contact_solver="condensed", **kw))
+
+
+def test_a_zone_that_outgrows_what_the_condensed_solver_affords_is_handed_to_the_coupled_solver(monkeypatch):
+    """As above, where every point is more than the condensed solver affords (its rule made to allow 100): the step
+    that outgrows the candidates is solved again by the coupled solver, and so are the rest. The run still equals the
+    condensed solver's, to the coupled solver's tolerance (1e-7 of the pressures, as tests/test_coupled_contact.py
+    has it; measured 1.3e-8)."""
+    monkeypatch.setattr(Candidates, "most", classmethod(lambda cls, ndof, method, steps: 150))
+    monkeypatch.setattr(candidates, "dense_points", lambda ndof, method, backsubs: 100)
     kw = dict(h_contact=0.01, progress=False)
     auto = workbench.run("memory_hertz3d", **kw)
     assert auto.attrs["contact_candidates"] == 150 and auto.attrs["contact_candidates_missed"] == 1

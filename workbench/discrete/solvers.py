@@ -86,9 +86,10 @@ class Solver:
         cost; else None."""
         return None
 
-    def kept(self, C: np.ndarray):
+    def kept(self, C: np.ndarray, again: bool = False):
         """(the condensed stiffness on the dofs C, the solve in two parts around them), both from one factorization
-        that keeps C last, where this solver makes one (asked before any solve); else None, and no work done."""
+        that keeps C last, where this solver makes one (asked before any solve, or ``again``: its factor made anew);
+        else None, and no work done."""
         return None
 
 
@@ -227,7 +228,9 @@ class PardisoCholesky(_HoldsMatrix, Solver):
                 return self._factor.schur[np.ix_(at, at)]
         return super().condensed_stiffness(C, B)
 
-    def kept(self, C: np.ndarray):
+    def kept(self, C: np.ndarray, again: bool = False):
+        if again and self._free_positions(C) is not None:
+            self._factor = self._kept = None  # (the old factor freed first: one factor's memory at a time)
         if self._factor is not None or self._free_positions(C) is None:
             return None
         stiffness = self.condensed_stiffness(C)

@@ -6,9 +6,10 @@ last in the step's factorization: the factor then gives their condensed stiffnes
 solves in two parts around them, and a step is the condensed solver's: the free displacement at P from the first
 part, the inequality solved densely on P with the other points Q held apart, and u everywhere from the second part,
 one solve's work in all. That u is the whole body's, so the assumption is checked exactly: where no point of Q then
-meets the foundation, the forces found on P (and none on Q) solve the whole inequality. Where one does, the step is
-solved again by the coupled solver (one more back-substitution for the free displacement, warm started from the
-forces found on P), and the candidates are given up for the run.
+meets the foundation, the forces found on P (and none on Q) solve the whole inequality. Where one does, the
+factorization is made again keeping every point, where the condensed solver affords them all, and the step solved on
+them; else the step is solved again by the coupled solver (one more back-substitution for the free displacement,
+warm started from the forces found on P), and the candidates are given up for the run.
 
 Measured on the hemisphere from rest to the full load in 4 steps (docs/schemes.md, "The candidate points"): at 47k
 dofs, with 5186 contact vertices and 1182 in contact at the end, the 1590 candidates cost the factorization about
@@ -50,13 +51,16 @@ class Candidates:
         The candidates, positions among ``nodes``.
     """
 
-    def __init__(self, nodes, P: np.ndarray):
+    def __init__(self, nodes, P: np.ndarray, whole: bool = False):
         self.nodes, self.P = nodes, np.asarray(P)
-        self.Q = np.setdiff1d(np.arange(nodes.size), self.P)
-        #: Whether a point of Q met the foundation: the candidates are given up for the run.
+        #: Whether the condensed solver affords every point, should the zone outgrow the candidates (:meth:`of`).
+        self.whole = whole
+        #: Whether a point of Q met the foundation where every point was not affordable: the coupled solver takes
+        #: over for the run.
         self.missed = False
-        #: Whether a factorization kept them (a solver that cannot, banded or iterative, leaves the coupled solver).
-        self.kept = False
+        #: The most candidates a factorization kept (0: none; a solver that cannot, banded or iterative, leaves the
+        #: coupled solver).
+        self.kept = 0
 
     @staticmethod
     def choose(g0, most: int):
@@ -83,7 +87,9 @@ class Candidates:
         n = d.numerics
         steps = np.inf if n.adaptive else n.T / n.k  # (error control takes many steps, as a rule: the upper bound)
         P = cls.choose(nodes.g0, cls.most(d.ndof, method, steps))
-        return None if P is None else cls(nodes, P)
+        # (every point, with the smaller of its two systems (ContactNodes._state_solution), costs the condensed solver
+        # at most an eighth of the dense work of condensed_up_to's rule: twice its points)
+        return None if P is None else cls(nodes, P, nodes.size <= 2 * dense_points(d.ndof, method, 3.0))
 
     #: As many candidates as a dense Cholesky factor of this many back-substitutions' cost
     #: (:func:`~workbench.schemes.halfspace.dense_points`) per this many steps, within these bounds (:meth:`most`).
@@ -112,29 +118,34 @@ class Candidates:
         outgrew them (1: the coupled solver took over)."""
         if candidates is None or not candidates.kept:
             return {"contact_candidates": 0, "contact_candidates_missed": 0}
-        return {"contact_candidates": int(candidates.P.size), "contact_candidates_missed": int(candidates.missed)}
+        return {"contact_candidates": candidates.kept, "contact_candidates_missed": int(candidates.missed)}
 
     def operator(self, solver):
-        """(the candidates' condensed stiffness, the solve in parts around them, the active set's scale rho) from
-        ``solver``'s factorization, which keeps them last (asked before any solve), or None where it cannot."""
+        """The candidates' operator from ``solver``'s factorization, which keeps them last (asked before any solve):
+        [the points P, their condensed stiffness, the solve in parts around them, the active set's scale rho, their
+        compliance, the solver]; or None where it cannot. A list: it grows in place (:meth:`equilibrium`)."""
         if self.missed:
             return None
-        found = solver.kept(self.nodes.C[self.P])
+        return self._keep(solver, self.P)
+
+    def _keep(self, solver, P, again: bool = False):
+        found = solver.kept(self.nodes.C[P], again)
         if found is None:
             return None
         stiffness, split = found
-        self.kept = True
+        self.kept = max(self.kept, P.size)
         compliance = inverse(stiffness)  # (the active set's systems on the forces: ContactNodes)
-        return stiffness, split, 100.0 / np.diag(stiffness), compliance  # (rho: the condensed solver's)
+        return [P, stiffness, split, 100.0 / np.diag(stiffness), compliance, solver]  # (rho: the condensed solver's)
 
     def equilibrium(self, operator, rhs: np.ndarray, u: np.ndarray, time: float):
         """u (in place) for the load ``rhs`` with the inequality solved on the candidates; the active-set iterations,
-        or None where a point of Q meets the foundation (then ``missed``, and the nodes' states and forces are those
-        found, as the coupled solver's start)."""
+        or None where a point of Q meets the foundation and the condensed solver does not afford every point (then
+        ``missed``, and the nodes' states and forces are those found, as the coupled solver's start). Where it does,
+        the operator's factorization is made again keeping every point, and the step solved on them."""
         if self.missed:
             return None
-        stiffness, split, rho, compliance = operator
-        nodes, P, Q = self.nodes, self.P, self.Q
+        P, stiffness, split, rho, compliance, solver = operator
+        nodes, Q = self.nodes, np.setdiff1d(np.arange(self.nodes.size), P)
         sub = nodes.subset(P)
         sub.compliance = compliance
         u_C = split.free_displacement(rhs)  # (u at C[P] with nothing acting there)
@@ -148,8 +159,12 @@ class Candidates:
         # Q's own states under no force: separated wherever it does not reach the foundation (state_of at lam = 0)
         states[Q] = nodes.layer.state_of(nodes.distance(u)[Q], np.ones(Q.size) * nodes.w[Q])
         nodes.states, nodes.lam = states, forces
-        if np.any(states[Q] != SEPARATED):
-            self.missed = True
-            return None
-        return iterations
+        if not np.any(states[Q] != SEPARATED):
+            return iterations
+        grown = self._keep(solver, np.arange(nodes.size), again=True) if self.whole else None
+        if grown is not None:  # (every point then: no check left, and the step again from its start)
+            operator[:] = grown
+            return self.equilibrium(operator, rhs, u, time)
+        self.missed = True
+        return None
 
