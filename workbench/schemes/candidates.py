@@ -157,7 +157,7 @@ class Candidates:
         states, forces = np.full(nodes.size, SEPARATED), np.zeros(nodes.size)
         states[P], forces[P] = sub.states, sub.lam
         # Q's own states under no force: separated wherever it does not reach the foundation (state_of at lam = 0)
-        states[Q] = nodes.layer.state_of(nodes.distance(u)[Q], np.ones(Q.size) * nodes.w[Q])
+        states[Q] = nodes.layer.state_of(nodes.distance(u)[Q], nodes.w[Q])
         nodes.states, nodes.lam = states, forces
         if not np.any(states[Q] != SEPARATED):
             return iterations
