@@ -142,20 +142,29 @@ class ContactSide:
                 out += Tt @ (self.weights * p_tau[:, c])
         return out
 
-    def restricted(self, dofs: np.ndarray) -> "RestrictedSide":
-        """The same traces on the columns ``dofs`` only (the contact unknowns of the condensed systems)."""
-        return RestrictedSide(self, dofs)
+    def restricted(self, dofs: np.ndarray, points=None) -> "RestrictedSide":
+        """The same traces on the columns ``dofs`` only (the contact unknowns of the condensed systems), at the
+        quadrature points ``points`` only where given (their traces then all within ``dofs``)."""
+        return RestrictedSide(self, dofs, points)
 
 
 class RestrictedSide:
-    """A :class:`ContactSide` acting on a sub-vector u_C (the dofs that carry a trace on the contact side)."""
+    """A :class:`ContactSide` acting on a sub-vector u_C (the dofs that carry a trace on the contact side), at some
+    of its points (``points``, positions among the side's; None: all)."""
 
-    def __init__(self, side: ContactSide, dofs: np.ndarray):
-        self.side, self.dofs = side, np.asarray(dofs)
-        self.weights, self.element, self.gap0 = side.weights, side.element, side.gap0
-        self.T_nu = side.T_nu[:, self.dofs].tocsr()
-        self.T_tau = [T[:, self.dofs].tocsr() for T in side.T_tau]
+    def __init__(self, side: ContactSide, dofs: np.ndarray, points=None):
+        self.side, self.dofs, self.points = side, np.asarray(dofs), points
+        rows = slice(None) if points is None else np.asarray(points)
+        self.weights, self.element = side.weights[rows], side.element[rows]
+        self.gap0 = side.gap0[rows] if side.gap0 is not None else None
+        self.T_nu = side.T_nu[rows][:, self.dofs].tocsr()
+        self.T_tau = [T[rows][:, self.dofs].tocsr() for T in side.T_tau]
         self.T_nu_t, self.T_tau_t = self.T_nu.T.tocsr(), [T.T.tocsr() for T in self.T_tau]
+
+    @property
+    def xyz(self) -> np.ndarray:
+        """The coordinates of its points."""
+        return self.side.xyz if self.points is None else self.side.xyz[self.points]
 
     def u_nu(self, u_C):
         return self.T_nu @ u_C

@@ -30,6 +30,8 @@ Examples
 """
 from __future__ import annotations
 
+import copy
+
 import numpy as np
 import scipy.linalg as la
 import scipy.sparse as sp
@@ -84,7 +86,16 @@ class ContactOperator:
         side = self.side
         T = abs(side.T_nu)
         area = T.T @ side.weights
-        return (T.T @ (side.weights[:, None] * side.side.xyz)) / np.maximum(area, 1e-300)[:, None], area
+        return (T.T @ (side.weights[:, None] * side.xyz)) / np.maximum(area, 1e-300)[:, None], area
+
+    def subset(self, cols: np.ndarray, points: np.ndarray) -> "ContactOperator":
+        """The operator on the dofs C[cols] and the side's quadrature points ``points`` alone (their traces within
+        those dofs): the contact problem of part of the side, the rest held apart
+        (:mod:`workbench.schemes.facet_candidates`)."""
+        sub = copy.copy(self)
+        sub.C = self.C[cols]
+        sub.side, sub.size = self.d.side.restricted(sub.C, points), sub.C.size
+        return sub
 
 
 class CondensedSystem:
@@ -178,6 +189,42 @@ class SchurOperator:
         self.solver.solve(rhs, out)
         self.applications += 1
         return self.sign * out[self.C] if self.B is None else self.B @ out
+
+
+class DenseSchur:
+    """The compliance S = (M^-1)_CC of a few contact dofs, formed (the inverse of their condensed stiffness, which a
+    factorization that keeps them last gives): :class:`SchurOperator`'s products as dense ones, where a
+    back-substitution would cost a factor's worth (:mod:`workbench.schemes.facet_candidates`). ``stiffness``: the
+    diagonal of S^-1, exactly.
+
+    It also serves :class:`CoupledNewton` as its ``halfspace``: the springs' system is then preconditioned by its
+    own inverse, and its conjugate gradients end after one iteration (:meth:`block`, :meth:`scale`).
+
+    >>> S = DenseSchur(np.array([[2.0, -1.0], [-1.0, 2.0]]))
+    >>> S.apply(np.array([3.0, 0.0])).round(12).tolist(), S.stiffness.tolist(), S.block(np.array([1])).round(6).tolist()
+    ([2.0, 1.0], [2.0, 2.0], [[0.666667]])
+    """
+
+    def __init__(self, stiffness: np.ndarray):
+        self.compliance = inverse(stiffness)
+        self.stiffness = np.diag(stiffness).copy()
+        self.largest = len(stiffness)  # (every set of springs: the block is cut, never computed)
+        self.applications = 0
+
+    def apply(self, x: np.ndarray) -> np.ndarray:
+        """S x for forces x at the dofs: their displacement under them."""
+        self.applications += 1
+        return self.compliance @ x
+
+    def block(self, U: np.ndarray, scale: float = 1.0) -> np.ndarray:
+        """``scale`` S_UU, a new array (the half-space's :meth:`~workbench.schemes.halfspace.HalfSpace.block`,
+        exact)."""
+        return scale * self.compliance[np.ix_(U, U)]
+
+    @staticmethod
+    def scale(U: np.ndarray, local: np.ndarray) -> float:
+        """1: S is the compliance itself (the half-space's scale to the body's stiffness, not needed)."""
+        return 1.0
 
 
 def matrix_diagonal(mat) -> np.ndarray:

@@ -43,6 +43,8 @@ from ..discrete import solvers
 from ..discrete.condensation import CondensedNewton, CondensedSystem, ContactOperator, CoupledNewton, SchurOperator
 from ..physics.ops import NP
 from .base import ErrorControlled, make_room
+from .candidates import Candidates
+from .facet_candidates import FacetCandidates
 from .halfspace import HalfSpace
 from .model_a import KelvinVoigtScheme, kink_event
 
@@ -90,9 +92,10 @@ class ImplicitEuler(ErrorControlled, KelvinVoigtScheme):
         self.cache_size = solvers.factors_kept(d.dim, d.ndof_global, self.method, self.cache_size)
         self.coupled = self.contact and d.numerics.coupled_contact(size, self.method, solvers.forms_schur(self.method))
         self.bonding = d.model.bonding
+        self.candidates = FacetCandidates.of(d, self.op, self.method, self.coupled)
         self._factors = OrderedDict()
-        self.newton = self.solver = None  # (the step's, from _prepare)
-        self.iterations = self.passes = 0
+        self.newton = self.solver = self.kept = None  # (the step's, from _prepare)
+        self.iterations = self.passes = self.inner = 0
         self.resolved = True
 
     def preflight(self, k_max: float) -> dict:
@@ -100,8 +103,9 @@ class ImplicitEuler(ErrorControlled, KelvinVoigtScheme):
         return self.bonding_check(k_max) | used
 
     def used(self) -> dict:
-        """The linear solver of the step's operators (chosen when the first is factored; the same for every a0)."""
-        return {"linear_solver": self.solver.name} if self.solver is not None else {}
+        """The step operators' linear solver (the same for every a0), and the contact candidates (.facet_candidates)."""
+        used = Candidates.attrs(self.candidates) if self.contact else {}
+        return used | ({"linear_solver": self.solver.name} if self.solver is not None else {})
 
     # -- the multistep formula -------------------------------------------------------------------------------
     def coefficients(self, k: float):
@@ -132,7 +136,7 @@ class ImplicitEuler(ErrorControlled, KelvinVoigtScheme):
         entry = self._factors.get(key)
         if not isinstance(entry, tuple):
             make_room(self._factors, self.cache_size, key)
-            self.M = self.solver = self.newton = self.split = None  # (freed with their operator, if dropped)
+            self.M = self.solver = self.newton = self.split = self.kept = None  # (freed with theirs, if dropped)
             built_from = a0 if entry is None else entry
             M = d.viscous.mat.CreateMatrix()
             M.AsVector().data = built_from * d.viscous.mat.AsVector() + d.elastic.mat.AsVector()
@@ -140,9 +144,10 @@ class ImplicitEuler(ErrorControlled, KelvinVoigtScheme):
             diagonal = self.exchange.diagonal(M) if self.coupled else None  # (on every process: it gathers)
             newton = self.exchange.run(lambda: self._newton(solver, diagonal), solver) if self.contact else None
             split = solver.split(self.op.C) if self.op is not None and not self.coupled else None
-            self._factors[key] = (M, solver, newton, built_from, split)
+            kept = self.candidates.operator(solver) if self.candidates is not None else None
+            self._factors[key] = (M, solver, newton, built_from, split, kept)
         self._factors.move_to_end(key)
-        self.M, self.solver, self.newton, _, self.split = self._factors[key]
+        self.M, self.solver, self.newton, _, self.split, self.kept = self._factors[key]
         self.resolved = self.bonding is None or self.bonding.resolved(k, d.model.beta0)
 
     def _newton(self, solver, diagonal=None):
@@ -195,15 +200,16 @@ class ImplicitEuler(ErrorControlled, KelvinVoigtScheme):
             lift[d.dirichlet_dofs] -= u[d.dirichlet_dofs]
             self.work.data = self.M * self.lift
             self.rhs_np -= self.work.FV().NumPy()
-        if self.split is not None:  # (one solve in two parts: z at the contact dofs now, the rest from du there)
-            self.z[self.op.C] = self.split.free_displacement(self.rhs_np)
-        else:
-            self.solver.solve(self.rhs_np, self.z)  # z = du without the contact forces
-        if d.moves_clamp:
-            self.z[d.dirichlet_dofs] = d.dirichlet_value(t_next) - u[d.dirichlet_dofs]
-        self.iterations = self.passes = 0
-        if self.contact:
-            self._contact(u, k, t_next)
+        self.iterations = self.passes = self.inner = 0
+        if not self._on_candidates(u, k, t_next):
+            if self.split is not None:  # (one solve in two parts: z at the contact dofs now, the rest from du there)
+                self.z[self.op.C] = self.split.free_displacement(self.rhs_np)
+            else:
+                self.solver.solve(self.rhs_np, self.z)  # z = du without the contact forces
+            if d.moves_clamp:
+                self.z[d.dirichlet_dofs] = d.dirichlet_value(t_next) - u[d.dirichlet_dofs]
+            if self.contact:
+                self._contact(u, k, t_next)
         u[:] = self.u_prev + self.z
         if not self.contact and self.bonding is not None:
             self._update_beta(k, d.beta.vec.FV().NumPy()[d.beta_dofs].copy())
@@ -219,13 +225,7 @@ class ImplicitEuler(ErrorControlled, KelvinVoigtScheme):
         C = self.op.C if self.op is not None else None
         z_C = x.gather(u + self.z)
         z_C = z_C[C].copy() if x.solves else None
-        # initial guess: linear extrapolation of the contact displacement (often the right active set)
-        u_C = x.gather(u)
-        u_C = u_C[C].copy() if x.solves else None
-        if len(self.history) >= 2:
-            before, k_prev = x.gather(self.history[-2][1]), self.history[-1][0] - self.history[-2][0]
-            if x.solves:
-                u_C += (k / k_prev) * (u_C - before[C])
+        u_C = extrapolated(self.exchange, u, self.history, C, k)
         beta = d.beta.vec.FV().NumPy() if d.beta is not None else None
         beta_old = beta[d.beta_dofs].copy() if beta is not None else None
         passes = self.max_passes
@@ -244,12 +244,24 @@ class ImplicitEuler(ErrorControlled, KelvinVoigtScheme):
             self._update_beta(k, beta_old)
             if d.world.max(np.abs(beta[d.beta_dofs] - previous).max(initial=0.0)) <= self.beta_tol:
                 break
-        self.iterations = x.share(self.newton.iterations if self.newton is not None else 0)
+        n = self.newton
+        self.iterations, self.inner = x.share(n.iterations if n is not None else 0), n.linear_iterations if n else 0
         if self.split is not None:
             return self.split.expand(u_C - self.u_prev[C], self.z)  # du from its values at the contact dofs
         out = np.zeros(d.ndof)
         self.solver.solve(x.spread(self._on_view(C, f_C)), out)
         self.z -= out
+
+    def _on_candidates(self, u: np.ndarray, k: float, t_next: float) -> bool:
+        """``self.z`` solved on the contact candidates (.facet_candidates); False where none, or they missed."""
+        if self.kept is None or self.candidates.missed:
+            return False
+        guess = extrapolated(self.exchange, u, self.history, self.candidates.C, k)
+        du = self.candidates.step(self.kept, self.rhs_np, u, guess, t_next, self.d.scene.name)
+        if du is not None:
+            self.z[:] = du
+            self.iterations, self.inner, self.passes = self.kept[1].iterations, self.kept[1].linear_iterations, 1
+        return du is not None
 
     def _on_view(self, C, values):
         """A dof vector of the view with ``values`` on the contact dofs ``C`` (None where the solver does not run)."""
@@ -281,9 +293,22 @@ class ImplicitEuler(ErrorControlled, KelvinVoigtScheme):
     def diagnostics(self) -> dict:
         out = {"newton_iterations": self.iterations, "coupling_passes": self.passes}
         if self.coupled:
-            out["linear_iterations"] = self.newton.linear_iterations if self.newton is not None else 0
+            out["linear_iterations"] = self.inner
         return out
 
     def event(self, start: dict):
         """Where in the last step the contact and bonding laws' kinks were crossed (:func:`.model_a.kink_event`)."""
         return kink_event(self.d, start, self._beta())
+
+
+def extrapolated(x, u: np.ndarray, history, C, k: float):
+    """u at the contact dofs ``C`` of the view of the exchange ``x``, extrapolated linearly from the last two states
+    of ``history`` to a step ``k`` (Newton's start: often the right active set); None where the contact problem is
+    not solved."""
+    u_C, before = x.gather(u), x.gather(history[-2][1]) if len(history) >= 2 else None
+    if not x.solves:
+        return None
+    u_C = u_C[C].copy()
+    if before is not None:
+        u_C += (k / (history[-1][0] - history[-2][0])) * (u_C - before[C])
+    return u_C

@@ -1,0 +1,117 @@
+"""Model A's implicit steps on the contact candidates against the coupled solver on the whole side, on the hemisphere.
+
+    python studies/model_a_candidates.py [--out data/hertz] [--levels 0.005 0.0035] [--scheme implicit]
+
+``hertz3d`` at its defaults (Kelvin-Voigt, normal compliance, backward Euler with k = 0.02 to T = 1: 52 steps, the
+load's kinks met by half steps), ``contact_solver = "auto"``, where ``auto`` takes the coupled solver (from 2500
+contact unknowns: h_contact = 0.005 and finer). Each level runs twice, each in a process of its own with one thread:
+as ``auto`` takes it now (``candidates``: :mod:`workbench.schemes.facet_candidates`) and with the coupled solver on
+the whole side alone (``coupled alone``: ``Candidates.most`` made 0, as before the candidates). Per run: dofs,
+contact dofs, candidates and whether they missed, Newton and inner iterations (the coupled solver's inner ones are
+back-substitutions; the candidates' are dense products), the whole ``workbench.run``, the time loop, PARDISO's
+factorizations inside it, ``per_step`` (the loop less those, over the steps), the process's peak memory, and
+``du_rel``, the largest difference of u at the contact dofs from the candidates' run, over its largest value (the two
+solve the same discrete problem). ``slope``: per_step against the dofs in log-log, per variant. Writes
+``model_a_candidates.csv`` (about 6 minutes at the default levels).
+"""
+from __future__ import annotations
+
+import argparse
+import csv
+import json
+import os
+import subprocess
+import sys
+import tempfile
+from pathlib import Path
+
+import numpy as np
+
+CHILD = """
+import json, resource, sys, time
+import numpy as np
+from threadpoolctl import threadpool_limits
+import workbench
+from workbench.discrete import discretisation, pardiso
+from workbench.schemes.candidates import Candidates
+hc, variant, scheme, out = float(sys.argv[1]), sys.argv[2], sys.argv[3], sys.argv[4]
+if variant != "candidates":
+    Candidates.most = classmethod(lambda cls, ndof, method, steps: 0)
+factoring = []
+init = pardiso.Factor.__init__
+
+def timed(self, *args, **kwargs):
+    t = time.perf_counter()
+    init(self, *args, **kwargs)
+    factoring.append(time.perf_counter() - t)
+
+with threadpool_limits(1):
+    discretisation.build(workbench.scene("hertz3d", h_contact=hc))  # (the mesh made and cached, modules loaded)
+    pardiso.Factor.__init__ = timed
+    t0 = time.perf_counter()
+    ds = workbench.run("hertz3d", h_contact=hc, scheme=scheme, progress=False, threads=1)
+    run = time.perf_counter() - t0
+np.save(out, ds.u_contact.values)
+steps, loop = int(ds.attrs["nsteps"]), float(ds.attrs["wall_time"])
+print(json.dumps(dict(h_contact=hc, variant=variant, scheme=scheme, ndof=int(ds.attrs["ndof"]),
+                      contact_vertices=int(ds.sizes["node"]),
+                      in_contact=int((ds.contact_pressure.values[-1] > 0).sum()),
+                      contact_solver=ds.attrs["contact_solver_used"], linear_solver=ds.attrs["linear_solver"],
+                      candidates=int(ds.attrs["contact_candidates"]),
+                      missed=int(ds.attrs["contact_candidates_missed"]), steps=steps,
+                      newton=int(ds.newton_iterations.sum()), inner=int(ds.linear_iterations.sum()),
+                      run=round(run, 2), loop=round(loop, 2), factorizations=len(factoring),
+                      factor_time=round(sum(factoring), 2), per_step=round((loop - sum(factoring)) / steps, 4),
+                      peak_mb=round(resource.getrusage(resource.RUSAGE_SELF).ru_maxrss / 1024.0))))
+"""
+
+
+def one(hc: float, variant: str, scheme: str, out: str) -> dict:
+    env = dict(os.environ, OMP_NUM_THREADS="1", MKL_NUM_THREADS="1", OPENBLAS_NUM_THREADS="1")
+    done = subprocess.run([sys.executable, "-c", CHILD, str(hc), variant, scheme, out], capture_output=True,
+                          text=True, env=env, check=True)
+    return json.loads(done.stdout.strip().splitlines()[-1])
+
+
+def main():
+    p = argparse.ArgumentParser(description=__doc__.splitlines()[0])
+    p.add_argument("--out", default="data/hertz")
+    p.add_argument("--levels", type=float, nargs="+", default=[0.005, 0.0035])
+    p.add_argument("--scheme", default="implicit", choices=["implicit", "bdf2"])
+    args = p.parse_args()
+    rows = []
+    with tempfile.TemporaryDirectory() as tmp:
+        for hc in args.levels:
+            first = None
+            for variant in ("candidates", "coupled alone"):
+                row = one(hc, variant, args.scheme, f"{tmp}/u.npy")
+                u = np.load(f"{tmp}/u.npy")
+                first = u if first is None else first
+                row["du_rel"] = float(np.abs(u - first).max() / np.abs(first).max())
+                rows.append(row)
+                print(row, flush=True)
+    for variant in dict.fromkeys(r["variant"] for r in rows):
+        same = [r for r in rows if r["variant"] == variant]
+        if len(same) > 1:
+            fit = np.polyfit(np.log([r["ndof"] for r in same]), np.log([r["per_step"] for r in same]), 1)[0]
+            for r in same:
+                r["slope"] = round(float(fit), 3)
+    out = Path(args.out)
+    out.mkdir(parents=True, exist_ok=True)
+    name = "model_a_candidates.csv" if args.scheme == "implicit" else f"model_a_candidates_{args.scheme}.csv"
+    with open(out / name, "w", newline="") as fh:
+        writer = csv.DictWriter(fh, fieldnames=list(dict.fromkeys(k for r in rows for k in r)))
+        writer.writeheader()
+        writer.writerows(rows)
+    print("| h_contact | dofs | contact vertices (in contact) | variant | candidates (missed) | Newton (inner) | run "
+          "| loop | factorizations | a step | peak | du |\n|" + "---|" * 12)
+    for r in rows:
+        print(f"| {r['h_contact']} | {r['ndof']} | {r['contact_vertices']} ({r['in_contact']}) | {r['variant']} | "
+              f"{r['candidates']} ({r['missed']}) | {r['newton']} ({r['inner']}) | {r['run']} s | {r['loop']} s | "
+              f"{r['factorizations']}: {r['factor_time']} s | {r['per_step']} s | {r['peak_mb']} MB | "
+              f"{r['du_rel']:.1e} |")
+    print(f"wrote {out / name}")
+
+
+if __name__ == "__main__":
+    main()

@@ -1,0 +1,128 @@
+"""Model A's implicit steps on the contact candidates (``workbench.schemes.facet_candidates``): where ``auto`` takes
+the coupled solver on a curved 3D side with a normal compliance, the steps are solved on the dofs of the facets of
+smallest gap, with the compliance at every other quadrature point checked from the whole u; a step where it acts
+there is the coupled solver's on the whole side, and so are the rest.
+
+``auto`` takes the coupled solver from 2500 contact unknowns (``COUPLED_FROM_SCHUR``); these tests make it do so
+from 100 (the fixture ``coupled_from_100``), so that meshes of a few thousand dofs take that path. Every run is
+compared with the condensed solver on the same discrete problem (an exact dense Newton on every contact dof)."""
+import numpy as np
+import pytest
+import scipy.sparse as sp
+
+import workbench
+from workbench.discrete import discretisation, pardiso
+from workbench.discrete.condensation import ContactOperator, DenseSchur
+from workbench.input.numerics import Numerics
+from workbench.schemes.candidates import Candidates
+from workbench.schemes.facet_candidates import FacetCandidates
+
+pytestmark = pytest.mark.skipif(not pardiso.available(), reason="the candidates are kept by PARDISO's factor")
+
+
+@pytest.fixture
+def coupled_from_100(monkeypatch):
+    original = Numerics.coupled_contact
+
+    def coupled_contact(self, unknowns, solver=None, schur=False, condensed_up_to=None):
+        return original(self, unknowns, solver, schur, 100)
+
+    monkeypatch.setattr(Numerics, "coupled_contact", coupled_contact)
+
+
+def _agree(a, b, tol):
+    """The same time grid, and the contact displacements and pressures equal to ``tol`` of their largest values."""
+    np.testing.assert_array_equal(a.time.values, b.time.values)
+    for name in ("u_contact", "contact_pressure"):
+        x, y = a[name].values, b[name].values
+        ok = np.isfinite(y)
+        assert np.array_equal(np.isfinite(x), ok), name
+        assert np.abs(x[ok] - y[ok]).max() <= tol * np.abs(y[ok]).max(), name
+
+
+def test_the_candidates_hold_the_zone_and_equal_the_condensed_solver(coupled_from_100, monkeypatch):
+    """The hemisphere at h_contact = 0.02 (332 contact vertices, 86 in contact at the end), 52 backward Euler steps:
+    150 candidates (fewer than the 331 the rule gives, so that the other points are checked at every step) hold the
+    zone. Equal to the condensed solver to 1e-9 (measured 3e-12), with as many inner iterations as Newton
+    iterations less the steps' starts: the springs' systems are preconditioned by their exact inverse."""
+    kw = dict(h_contact=0.02, progress=False)
+    monkeypatch.setattr(Candidates, "most", classmethod(lambda cls, ndof, method, steps: 150))
+    auto = workbench.run("hertz3d", **kw)
+    assert auto.attrs["contact_solver_used"] == "coupled"
+    assert auto.attrs["contact_candidates"] == 150 and auto.attrs["contact_candidates_missed"] == 0
+    assert int((auto.contact_pressure.values[-1] > 0).sum()) == 86
+    _agree(auto, workbench.run("hertz3d", contact_solver="condensed", **kw), 1e-9)
+    assert int(auto.linear_iterations.sum()) <= int(auto.newton_iterations.sum())
+    coupled = workbench.run("hertz3d", contact_solver="coupled", **kw)
+    assert coupled.attrs["contact_candidates"] == 0  # (asked by name: the coupled solver on the whole side)
+    assert int(coupled.linear_iterations.sum()) > 2 * int(auto.linear_iterations.sum())
+
+
+def test_a_zone_that_outgrows_the_candidates_goes_to_the_coupled_solver(coupled_from_100, monkeypatch):
+    """40 candidates do not hold the zone: the step where the compliance first acts beyond them is solved again on
+    the whole side by the coupled solver, and so are the rest. Still equal to the condensed solver, to the coupled
+    solver's tolerance (1e-7 of the pressures, as tests/test_coupled_contact.py has it; measured 1e-10)."""
+    kw = dict(h_contact=0.02, progress=False)
+    monkeypatch.setattr(Candidates, "most", classmethod(lambda cls, ndof, method, steps: 40))
+    auto = workbench.run("hertz3d", **kw)
+    assert auto.attrs["contact_candidates"] == 40 and auto.attrs["contact_candidates_missed"] == 1
+    _agree(auto, workbench.run("hertz3d", contact_solver="condensed", **kw), 1e-7)
+
+
+@pytest.mark.parametrize("kw", [dict(h_contact=0.02, scheme="bdf2", rtol=1e-3, T=0.5),
+                                dict(order=2, h_contact=0.04, c_nu=1e7, tau=1e-3, k=0.1, T=0.3)],
+                         ids=["BDF2 under error control", "P2, stiff compliance"])
+def test_the_candidates_under_error_control_and_on_p2(coupled_from_100, kw):
+    """Unlike the first test: BDF2 with error control (its own step sizes, each factored keeping the candidates, the
+    rule's count at its defaults), and P2 elements with a stiff compliance (the candidates' dofs include the edges';
+    the rule's count covers every contact dof there, so none is checked). Against the condensed solver to 1e-8."""
+    kw = kw | dict(progress=False)
+    auto = workbench.run("hertz3d", **kw)
+    assert auto.attrs["contact_candidates"] > 0 and auto.attrs["contact_candidates_missed"] == 0
+    _agree(auto, workbench.run("hertz3d", contact_solver="condensed", **kw), 1e-8)
+
+
+def test_none_where_the_side_is_flat_glued_or_the_solver_condensed():
+    """No candidates on a flat side (the block), with a glue (its forces act on the whole bonded side), or where
+    ``auto`` condenses the contact problem (the hemisphere's 332 vertices, under its own rule)."""
+    block = workbench.run("block", h=0.25, T=0.1, k=0.05, scheme="implicit", contact_solver="coupled", progress=False)
+    assert block.attrs["contact_candidates"] == 0
+    d = discretisation.build(workbench.scene("slab", h=0.1, c_tau=1.0))
+    assert FacetCandidates.of(d, ContactOperator(d), "pardiso", True) is None
+    hemisphere = workbench.run("hertz3d", h_contact=0.02, T=0.1, progress=False)
+    assert hemisphere.attrs["contact_solver_used"] == "condensed" and hemisphere.attrs["contact_candidates"] == 0
+
+
+def test_the_chosen_facets_close_over_their_dofs():
+    """On the hemisphere's side: the chosen points are exactly those whose traces lie within the chosen dofs, those
+    dofs number at most ``most``, and no point left out has a smaller gap than every chosen one has (the facets go
+    in order of gap)."""
+    d = discretisation.build(workbench.scene("hertz3d", h_contact=0.02))
+    side = ContactOperator(d).side
+    T = sp.csr_matrix(side.T_nu)
+    for most in (30, 150, 331):
+        cols, points = FacetCandidates.choose(T, side.element, side.gap0, most)
+        assert 0 < cols.size <= most
+        inside = np.zeros(T.shape[1], dtype=bool)
+        inside[cols] = True
+        within = np.array([inside[T[i].indices[T[i].data != 0]].all() for i in range(T.shape[0])])
+        assert np.array_equal(np.nonzero(within)[0], points)
+        left = np.setdiff1d(np.arange(T.shape[0]), points)
+        if left.size:
+            facet_gap = np.full(side.element.max() + 1, np.inf)
+            np.minimum.at(facet_gap, side.element, side.gap0)
+            assert facet_gap[side.element[left]].min() >= facet_gap[side.element[points]].min()
+
+
+def test_the_dense_schur_is_the_compliance_of_the_factor_that_keeps_the_dofs():
+    """DenseSchur from a condensed stiffness S: its products are S^-1 x, its blocks S^-1's, its stiffness S's
+    diagonal; against a dense inverse of a random SPD matrix."""
+    rng = np.random.default_rng(3)
+    A = rng.standard_normal((30, 30))
+    S = A @ A.T + 30 * np.eye(30)
+    dense = DenseSchur(S)
+    x = rng.standard_normal(30)
+    np.testing.assert_allclose(dense.apply(x), np.linalg.solve(S, x), rtol=1e-12, atol=1e-14)
+    U = np.array([2, 5, 11])
+    np.testing.assert_allclose(dense.block(U, 2.0), 2.0 * np.linalg.inv(S)[np.ix_(U, U)], rtol=1e-12, atol=1e-15)
+    np.testing.assert_array_equal(dense.stiffness, np.diag(S))

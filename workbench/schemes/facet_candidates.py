@@ -1,0 +1,139 @@
+"""Model A's implicit steps on the part of a curved contact side it reaches first (``contact_solver = "auto"``).
+
+The counterpart of :mod:`workbench.schemes.candidates` for a normal compliance (``scheme = "implicit"`` or
+``"bdf2"``). A curved body (the Hertz hemisphere, a body from a mesh file) comes into contact where its initial gap
+is smallest, and the zone grows outward through the side's facets in that order. The compliance acts at the side's
+quadrature points, each on the dofs of its facet, so the candidates are facets: those of smallest gap, as many as
+their dofs P fit :meth:`~workbench.schemes.candidates.Candidates.most`, and every other point whose traces lie within
+P. The step's factorization keeps P last (PARDISO's Schur complement: their condensed stiffness, and solves in two
+parts around them), and a step is then
+
+* the free displacement at P from the first part of one solve;
+* the coupled solver's semismooth Newton (:class:`~workbench.discrete.condensation.CoupledNewton`, the same
+  iteration as on the whole side) on P's points alone, its products with the compliance dense
+  (:class:`~workbench.discrete.condensation.DenseSchur`) instead of one back-substitution each;
+* u everywhere from the second part.
+
+That u is the whole body's, so the assumption is checked exactly: where the compliance is zero at every other point
+Q of the side, the forces found on P solve the whole step. Where it is not, the step is solved again on the whole
+side by the coupled solver, and the candidates are given up for the run.
+
+Not for a glue or a friction (their forces act on the whole bonded side, not where it touches), a flat side (every
+gap equal: nothing tells the points apart), a moving clamp, several processes, or a solver that cannot keep dofs
+last (the banded and iterative ones).
+
+Measured on the hemisphere (``hertz3d``, 52 steps to T = 1; docs/schemes.md, "The candidate points"): see there.
+"""
+from __future__ import annotations
+
+import numpy as np
+
+from ..discrete.condensation import CoupledNewton, DenseSchur
+from ..physics.ops import NP
+from .candidates import Candidates
+
+
+class FacetCandidates:
+    """The contact dofs of the facets of smallest initial gap, solved on with a dense compliance, and the other
+    quadrature points checked (module docs).
+
+    Parameters
+    ----------
+    op : ContactOperator
+        The whole side's.
+    cols : array of int
+        The candidates P, positions among ``op.C``.
+    points : array of int
+        The side's quadrature points whose traces lie within P; the others are checked after each step.
+    """
+
+    def __init__(self, op, cols: np.ndarray, points: np.ndarray):
+        self.op, self.C = op, op.C[cols]
+        self.sub = op.subset(cols, points)
+        others = np.setdiff1d(np.arange(op.side.T_nu.shape[0]), points)
+        side = op.d.side  # (the traces on the whole dof vector)
+        self.T_Q = side.T_nu[others].tocsr() if others.size else None
+        self.gap_Q = side.gap0[others] if others.size else None
+        #: Whether the compliance acted beyond P once: the coupled solver on the whole side from then on.
+        self.missed = False
+        #: How many dofs a factorization kept (0: none, the solver cannot).
+        self.kept = 0
+
+    @classmethod
+    def of(cls, d, op, method: str, coupled: bool):
+        """The candidates of the contact operator ``op`` where ``auto`` took the coupled solver (``coupled``) on a
+        curved 3D side with a normal compliance alone, for a factor ``method`` (as many dofs as
+        :meth:`Candidates.most` for the run's steps T / k, many under error control); else None."""
+        n = d.numerics
+        if (not coupled or op is None or d.dim != 3 or op.tangential or d.beta is not None or d.moves_clamp
+                or n.contact_solver != "auto" or op.side.gap0 is None):
+            return None
+        steps = np.inf if n.adaptive else n.T / n.k
+        chosen = cls.choose(op.side.T_nu, op.side.element, op.side.gap0, Candidates.most(d.ndof, method, steps))
+        return None if chosen is None else cls(op, *chosen)
+
+    @staticmethod
+    def choose(T, element: np.ndarray, gap: np.ndarray, most: int):
+        """(cols, points): the columns of ``T`` (the points' traces on the contact dofs) on the facets of smallest
+        gap (a facet's: its points' least ``gap``; ``element``: each point's facet), as many as fit in ``most``
+        without splitting a set of facets of equal gap, and every point whose traces lie within them; every column
+        and point where all fit; None where none does.
+
+        >>> import scipy.sparse as sp
+        >>> T = sp.csr_matrix(np.array([[1, 1, 0, 0], [0, 1, 1, 0], [0, 0, 1, 1.0]]))  # three facets on a line
+        >>> [a.tolist() for a in FacetCandidates.choose(T, np.arange(3), np.array([0.2, 0.0, 0.1]), 3)]
+        [[1, 2, 3], [1, 2]]
+        >>> FacetCandidates.choose(T, np.arange(3), np.zeros(3), 3) is None  # (equal gaps: all or none)
+        True
+        """
+        facets = int(element.max()) + 1
+        facet_gap = np.full(facets, np.inf)
+        np.minimum.at(facet_gap, element, gap)
+        order = np.argsort(facet_gap, kind="stable")
+        rank = np.empty(facets, dtype=np.int64)
+        rank[order] = np.arange(facets)
+        T = T.tocoo()
+        on = T.data != 0
+        rows, cols = T.row[on], T.col[on]
+        first = np.full(T.shape[1], facets)  # (the rank of the first facet, in gap order, that reaches a column)
+        np.minimum.at(first, cols, rank[element[rows]])
+        within = np.cumsum(np.bincount(first[first < facets], minlength=facets))  # columns of the first r + 1 facets
+        if within[-1] <= most:
+            return np.arange(T.shape[1]), np.arange(T.shape[0])
+        r = int(np.searchsorted(within, most, side="right")) - 1
+        if r < 0:
+            return None
+        taken = facet_gap < facet_gap[order[r + 1]]
+        if not taken.any():
+            return None
+        inside = np.zeros(T.shape[1], dtype=bool)
+        inside[cols[taken[element[rows]]]] = True
+        beyond = np.bincount(rows, weights=~inside[cols], minlength=T.shape[0])
+        return np.nonzero(inside)[0], np.nonzero(beyond == 0)[0]
+
+    def operator(self, solver):
+        """(the solve in parts around P, the Newton iteration on P) from ``solver``'s factorization, which keeps P
+        last (asked before any solve); None where it cannot."""
+        if self.missed:
+            return None
+        found = solver.kept(self.C)
+        if found is None:
+            return None
+        stiffness, split = found
+        self.kept = max(self.kept, self.C.size)
+        schur = DenseSchur(stiffness)  # (also the springs' exact preconditioner, in the half-space's place)
+        return split, CoupledNewton(schur, self.sub, halfspace=schur)
+
+    def step(self, operator, rhs: np.ndarray, u: np.ndarray, guess: np.ndarray, time: float, label: str = ""):
+        """du of the step M du + j(u + du, .) = ``rhs`` solved on P from ``guess`` (u at P, in place), or None where
+        the compliance then acts beyond P (``missed``)."""
+        split, newton = operator
+        newton.iterations = newton.linear_iterations = 0
+        z_C = u[self.C] + split.free_displacement(rhs)
+        newton.solve(guess, z_C, time, label)
+        du = np.zeros_like(u)
+        split.expand(guess - u[self.C], du)
+        if self.T_Q is not None and np.any(self.op.contact.normal(NP, self.T_Q @ (u + du), None, self.gap_Q)):
+            self.missed = True
+            return None
+        return du
