@@ -263,6 +263,13 @@ class SplitSolve:
         self._y = s.factor.forward(rhs[s.free])
         return s.factor.kept_solve(self._y[s.factor.keep])[self._sorted]
 
+    def condensed_load(self, rhs: np.ndarray) -> np.ndarray:
+        """y_C for the load ``rhs``, in C's order: the first part of the solve alone, for a caller that holds C's
+        compliance (u_C = S_C^-1 y_C is then a dense product, and S_C's own Cholesky factor is never formed)."""
+        s = self.solver
+        self._y = s.factor.forward(rhs[s.free])
+        return self._y[self.at]
+
     def expand(self, u_C: np.ndarray, out: np.ndarray) -> None:
         """The solution on the free dofs, given its values ``u_C`` on C, for the last load (the held dofs of ``out``
         are the caller's, left as they are)."""

@@ -148,7 +148,7 @@ class Candidates:
         nodes, Q = self.nodes, np.setdiff1d(np.arange(self.nodes.size), P)
         sub = nodes.subset(P)
         sub.compliance = compliance
-        u_C = split.free_displacement(rhs)  # (u at C[P] with nothing acting there)
+        u_C = compliance @ split.condensed_load(rhs)  # (u at C[P] with nothing acting there)
         free = nodes.sign * u_C - (sub.g0 if sub.g0 is not None else 0.0)
         s, lam, iterations = sub.solve(stiffness, rho, free, time, u)
         if sub.g0 is not None:
