@@ -26,8 +26,8 @@ one: measured on the hemisphere at 47k dofs with BDF2 at rtol = 1e-3 (373 steps,
 the candidates against 277 s without (0.28 against 0.40 s a step, the factorizations 2.24 against 1.14 s each).
 
 Measured with fixed steps on the hemisphere (``hertz3d`` at its defaults, 52 steps of backward Euler;
-``python studies/model_a_candidates.py``, docs/schemes.md, "The candidate points"): at 47k dofs 15.4 s against
-38.7 s for the coupled solver on the whole side, at 106k 53.3 s against 122.0 s, equal to 2e-10.
+``python studies/model_a_candidates.py``, docs/schemes.md, "Model A's implicit steps on candidate facets"): at 47k
+dofs 16.8 s against 45.3 s for the coupled solver on the whole side, at 106k 56.0 s against 125.0 s, equal to 2e-10.
 """
 from __future__ import annotations
 
