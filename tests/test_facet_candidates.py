@@ -14,6 +14,7 @@ import workbench
 from workbench.discrete import discretisation, pardiso
 from workbench.discrete.condensation import ContactOperator, DenseSchur
 from workbench.input.numerics import Numerics
+from workbench.schemes import facet_candidates
 from workbench.schemes.candidates import Candidates
 from workbench.schemes.facet_candidates import FacetCandidates
 
@@ -61,12 +62,27 @@ def test_the_candidates_hold_the_zone_and_equal_the_condensed_solver(coupled_fro
     assert int(coupled.linear_iterations.sum()) > 2 * int(auto.linear_iterations.sum())
 
 
-def test_a_zone_that_outgrows_the_candidates_goes_to_the_coupled_solver(coupled_from_100, monkeypatch):
-    """40 candidates do not hold the zone: the step where the compliance first acts beyond them is solved again on
-    the whole side by the coupled solver, and so are the rest. Still equal to the condensed solver, to the coupled
-    solver's tolerance (1e-7 of the pressures, as tests/test_coupled_contact.py has it; measured 1e-10)."""
+def test_a_zone_that_outgrows_the_candidates_is_solved_on_every_dof(coupled_from_100, monkeypatch):
+    """40 candidates do not hold the zone. The side's 331 contact dofs are few enough for dense work on them all
+    (``whole``), so the step where the compliance first acts beyond the candidates is solved again on every dof,
+    its factorization made again keeping them, and so are the rest of the run's steps, in both of its operators
+    (two step sizes): equal to the condensed solver to 1e-9."""
     kw = dict(h_contact=0.02, progress=False)
     monkeypatch.setattr(Candidates, "most", classmethod(lambda cls, ndof, method, steps: 40))
+    auto = workbench.run("hertz3d", **kw)
+    assert auto.attrs["contact_candidates"] == 331 and auto.attrs["contact_candidates_missed"] == 0
+    assert np.unique(np.diff(auto.time.values).round(9)).size == 2
+    _agree(auto, workbench.run("hertz3d", contact_solver="condensed", **kw), 1e-9)
+
+
+def test_a_zone_that_outgrows_what_is_affordable_goes_to_the_coupled_solver(coupled_from_100, monkeypatch):
+    """As above, where every dof is more than is affordable (the rule made to allow 100): the step where the
+    compliance first acts beyond the candidates is solved again on the whole side by the coupled solver, and so are
+    the rest. Still equal to the condensed solver, to the coupled solver's tolerance (1e-7 of the pressures, as
+    tests/test_coupled_contact.py has it; measured 1e-10)."""
+    kw = dict(h_contact=0.02, progress=False)
+    monkeypatch.setattr(Candidates, "most", classmethod(lambda cls, ndof, method, steps: 40))
+    monkeypatch.setattr(facet_candidates, "dense_points", lambda ndof, method, backsubs: 100)
     auto = workbench.run("hertz3d", **kw)
     assert auto.attrs["contact_candidates"] == 40 and auto.attrs["contact_candidates_missed"] == 1
     _agree(auto, workbench.run("hertz3d", contact_solver="condensed", **kw), 1e-7)

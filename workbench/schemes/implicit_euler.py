@@ -256,7 +256,7 @@ class ImplicitEuler(ErrorControlled, KelvinVoigtScheme):
         """``self.z`` solved on the contact candidates (.facet_candidates); False where none, or they missed."""
         if self.kept is None or self.candidates.missed:
             return False
-        guess = extrapolated(self.exchange, u, self.history, self.candidates.C, k)
+        guess = lambda C: extrapolated(self.exchange, u, self.history, C, k)  # noqa: E731
         du = self.candidates.step(self.kept, self.rhs_np, u, guess, t_next, self.d.scene.name)
         if du is not None:
             self.z[:] = du
