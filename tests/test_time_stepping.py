@@ -318,8 +318,9 @@ def test_a_kink_is_charged_against_its_share_of_the_tolerance():
 @pytest.mark.slow
 def test_bdf2_steps_reuse_their_factorisations(monkeypatch):
     """BDF2's matrix a0 K_A + K_G depends on the step and the step ratio. An error-controlled run shortens a free step
-    (by < 9 %) so that a0 lies on the grid 2^(j/8), and so meets the same few matrices again: on the slab (h = 0.1,
-    rtol 1e-3) at most 30 % of the solves factor a matrix (without the grid: 43 %)."""
+    (by < 19 %) so that a0 lies on the grid 2^(j/4), and so meets the same few matrices again: on the slab (h = 0.1,
+    rtol 1e-3) at most 15 % of the solves factor a matrix (measured 9 %; 21 % on the grid 2^(j/8), 43 % without a
+    grid)."""
     import math
 
     from workbench.discrete import discretisation, solvers
@@ -327,15 +328,15 @@ def test_bdf2_steps_reuse_their_factorisations(monkeypatch):
 
     scheme = BDF2(discretisation.build(workbench.scene("tp1", h=0.1)))
     scheme.history = [(0.0, None, None), (0.03, None, None)]  # k' = 0.03
-    for k in (0.01, 0.029, 0.05, 0.0601):
+    for k in (0.01, 0.0212, 0.029, 0.05, 0.0601):  # (0.0212: k / k' = 0.71, the largest cut)
         ks = scheme.admissible_step(k)
         a0 = (0.03 + 2 * ks) / ((0.03 + ks) * ks)
-        assert 0.91 * k <= ks <= k and abs(8 * math.log2(a0) - round(8 * math.log2(a0))) < 1e-9
+        assert 0.81 * k <= ks <= k and abs(4 * math.log2(a0) - round(4 * math.log2(a0))) < 1e-9
     calls = []
     factor = solvers.factor
     monkeypatch.setattr(solvers, "factor", lambda *a, **kw: calls.append(1) or factor(*a, **kw))
     ds = workbench.run("slab", **dict(SLAB, h=0.1), scheme="bdf2", rtol=1e-3, k=_first_step(1e-3), progress=False)
-    assert len(calls) <= 0.3 * (ds.attrs["accepted_steps"] + ds.attrs["rejected_steps"]), (len(calls), ds.attrs)
+    assert len(calls) <= 0.15 * (ds.attrs["accepted_steps"] + ds.attrs["rejected_steps"]), (len(calls), ds.attrs)
 
 
 def test_round_off_at_a_kink_is_not_an_event():

@@ -49,13 +49,20 @@ class BDF2(ImplicitEuler):
         k_prev = self.history[-1][0] - self.history[-2][0]
         return k_prev, k / k_prev
 
-    #: a0 is snapped up to 2^(j / A0_LEVELS) s^-1 in error-controlled runs (a step at most 1 - 2^(-1/8) ~ 8 %
-    #: shorter): a0 K_A + K_G depends on k and on the step ratio, so without the grid nearly every step met a new
-    #: matrix (measured on the slab of issue 11, rtol 1e-3: 304 factorisations in 364 solves, 80 % of the run).
-    A0_LEVELS = 8
+    #: a0 is snapped up to 2^(j / A0_LEVELS) s^-1 in error-controlled runs (a step at most 19 % shorter: a0 falls at
+    #: least 0.83 times as fast as k grows, the least at k / k' = 0.71): a0 K_A + K_G depends on k and on the step
+    #: ratio, so without the grid nearly every step met a new matrix (measured on the slab of issue 11, rtol 1e-3: 304
+    #: factorisations in 364 solves, 80 % of the run). A run whose step grows over many octaves factors about once per
+    #: level it passes, so the grid's spacing trades factorisations against steps. Measured at rtol 1e-3
+    #: (``studies/bdf2_a0_grid.py``, one run each, 8 / 4 / 2 levels an octave): hertz3d at 47k dofs 113 / 67 / 57
+    #: factorisations for 381 / 389 / 404 solves, 290 / 223 / 207 s (268 / 217 / 209 s in runs of their own); at 12k 86
+    #: / 59 / 46 for 453 / 449 / 471, 54.5 / 44.3 / 42.3 s; the slab (410 dofs) 112 / 60 / 44 for 529 / 532 / 577, 1.9 /
+    #: 1.9 / 2.1 s. u at T moved by 2e-5 of its largest value or less. Four: most of the 3D gain, for at most 2 % more
+    #: solves, where two take up to 9 % more.
+    A0_LEVELS = 4
 
     def admissible_step(self, k: float) -> float:
-        """The largest step <= k whose a0 = (k' + 2k) / ((k' + k) k) lies on the grid 2^(j/8): the root of
+        """The largest step <= k whose a0 = (k' + 2k) / ((k' + k) k) lies on the grid 2^(j/4): the root of
         A k^2 + (A k' - 2) k - k' = 0 for the grid value A >= a0(k) (a0 falls with k)."""
         steps = self._steps(k)
         if steps is None:
