@@ -235,6 +235,23 @@ def test_cli_refusal_is_one_line_listing_every_difference_and_writes_nothing(arc
     assert not (tmp_path / "new.nc").exists() and old.stat().st_mtime_ns == stamp
 
 
+def test_a_restart_naming_its_scene_goes_on_with_the_archives_values(archives, tmp_path):
+    """Found as a new user would type it: ``workbench run tp5 --restart a.nc --T 0.2`` compared the preset's defaults
+    (h = 0.0125, the archive's 0.1) with the archive and was refused for values the user never gave. The scene's name
+    now names the archive's run: it goes on with the archive's values, as without the name (bitwise); another
+    built-in name is refused, naming both, in one line and without a traceback."""
+    plain = workbench.run(restart=archives["tp5"], T=0.2, progress=False)
+    named = workbench.run("tp5", restart=archives["tp5"], T=0.2, progress=False)
+    assert named.attrs["h"] == plain.attrs["h"] == 0.1 and named.attrs["nsteps"] == plain.attrs["nsteps"] == 20
+    np.testing.assert_array_equal(named.u_contact.values, plain.u_contact.values)
+    with pytest.raises(workbench.ParameterError, match="differs from the archive's in h 0.1 -> 0.05"):
+        workbench.run("tp5", restart=archives["tp5"], T=0.2, h=0.05, progress=False)  # (a value given still counts)
+    p = subprocess.run([sys.executable, "-m", "workbench.cli", "run", "tp1", "--restart", archives["tp5"], "--T", "0.2",
+                        "--no-progress", "-o", str(tmp_path / "new.nc")], capture_output=True, text=True)
+    assert p.returncode == 2 and "Traceback" not in p.stderr and len(p.stderr.strip().splitlines()) == 1
+    assert "the archive is a run of 'tp5', not 'tp1'" in p.stderr and not (tmp_path / "new.nc").exists()
+
+
 def test_an_archive_without_state_is_a_named_error(archives, tmp_path):
     """An older archive (no state), one written without it, one of a diverged run: NoRestartState, saying so."""
     plain = workbench.write(without_state(workbench.load(archives["tp5"])), tmp_path / "plain.nc")

@@ -55,7 +55,8 @@ def run(scene=None, *, restart=None, checkpoint=None, progress=None, record_time
     ----------
     scene : str, path or Scene
         Built-in name (``workbench scenes`` lists them), TOML file or Scene. With ``restart`` it
-        may be left out (the archive's scene, with ``overrides``).
+        may be left out (the archive's scene, with ``overrides``); a built-in name then means the same
+        (it must be the archive's scene's).
     restart : path, optional
         Continue the run archived there (or its last checkpoint) to T (:mod:`workbench.running.restart`):
         the result equals the run straight to T. Only T and the output options may differ from the
@@ -266,8 +267,15 @@ def _scene_and_archive(scene, restart, overrides: dict, model):
     archive, state = restarts.read(restart)
     if "T" in overrides:  # (before the scene: the archive's snapshots after an earlier T would be refused first)
         restarts.check_time(restart, state, scenes.PARAMETERS["T"].check(overrides["T"]))
+    # a built-in name with the restart names the archive's run (its values, but those given), not the preset's
+    # defaults: `workbench run slab --restart a.nc --T 2` goes on with the archive's h and scheme
+    named = isinstance(scene, str) and scene in scenes.PRESETS
+    if named and scene != archive.attrs.get("scene"):
+        raise ParameterError(f"restart {str(restart)!r}: the archive is a run of {archive.attrs.get('scene')!r}, not "
+                             f"{scene!r}; leave the scene out to continue it")
     try:
-        sc = scenes.scene(scene, **overrides) if scene is not None else restarts.archived_scene(archive, **overrides)
+        sc = restarts.archived_scene(archive, **overrides) if scene is None or named else \
+            scenes.scene(scene, **overrides)
     except ParameterError as err:
         raise restarts.NoRestartState(f"restart {str(restart)!r}: the archive's scene cannot be made again ({err})") \
             from None
