@@ -54,9 +54,8 @@ def run(scene=None, *, restart=None, checkpoint=None, progress=None, record_time
     Parameters
     ----------
     scene : str, path or Scene
-        Built-in name (``workbench scenes`` lists them), TOML file or Scene. With ``restart`` it
-        may be left out (the archive's scene, with ``overrides``); a built-in name then means the same
-        (it must be the archive's scene's).
+        Built-in name (``workbench scenes`` lists them), TOML file or Scene. With ``restart`` it may be left
+        out (the archive's scene, with ``overrides``); a built-in name then means the same (the archive's).
     restart : path, optional
         Continue the run archived there (or its last checkpoint) to T (:mod:`workbench.running.restart`):
         the result equals the run straight to T. Only T and the output options may differ from the
