@@ -31,6 +31,7 @@ Examples
 from __future__ import annotations
 
 import copy
+import functools
 
 import numpy as np
 import scipy.linalg as la
@@ -355,7 +356,8 @@ class SpringsFactor:
         self.U, self.G, self.J0 = R.copy(), G, J.tocsr()
         M = J @ G
         M[np.diag_indices_from(M)] += 1.0
-        self.lu = la.lu_factor(M, check_finite=False)
+        # (M^T's factor, in place: M is C-ordered, so M^T is LAPACK's order and no third |U|^2 array is made)
+        self.lu = la.lu_factor(M.T, overwrite_a=True, check_finite=False)
         self._last = None  # (the springs holds() last took: (positions of R in U, J on U, J - J0 on U, D))
         self.holds(J, R)
 
@@ -384,19 +386,20 @@ class SpringsFactor:
 
     def solver(self):
         """r (on R) -> (I + J G_RR)^-1 J r for the springs (J, R) that :meth:`holds` last took."""
-        lu, (at, J_U, dJ, D) = self.lu, self._last
+        at, J_U, dJ, D = self._last
+        lu = functools.partial(la.lu_solve, self.lu, trans=1, check_finite=False)  # (M y = b from M^T's factor)
         correct = None
         if D.size:
             W = dJ[D] @ self.G  # (|D| x |U|: the bracket on U is M0 + E_D W)
             E = np.zeros((self.U.size, D.size))
             E[D, np.arange(D.size)] = 1.0
-            Z = la.lu_solve(lu, E, check_finite=False)
+            Z = lu(E)
             correct = (Z, W, la.lu_factor(np.eye(D.size) + W @ Z, check_finite=False))
 
         def apply(r):
             y = np.zeros(self.U.size)
             y[at] = r
-            x = la.lu_solve(lu, J_U @ y, check_finite=False)
+            x = lu(J_U @ y)
             if correct is not None:
                 Z, W, K = correct
                 x -= Z @ la.lu_solve(K, W @ x, check_finite=False)
