@@ -31,8 +31,8 @@ the candidates against 277 s without (0.28 against 0.40 s a step, the factorizat
 
 Measured with fixed steps on the hemisphere (``hertz3d`` at its defaults, 52 steps of backward Euler;
 ``python studies/model_a_candidates.py``, docs/schemes.md, "Model A's implicit steps on candidate facets"): at 47k
-dofs 16.3 s against 42.7 s for the coupled solver on the whole side, at 106k 58.1 s against 132.0 s, at 193k (where
-the zone outgrows the candidates) 281 s against 330 s; equal to 4e-10.
+dofs 13.4 s against 37.9 s for the coupled solver on the whole side, at 106k 44.0 s against 110.2 s, at 193k (where
+the zone outgrows the candidates) 234 s against 315 s; equal to 4e-10.
 """
 from __future__ import annotations
 
