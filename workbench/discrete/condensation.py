@@ -336,6 +336,8 @@ class SpringsFactor:
     |D| x |D| LU, instead of a new factor, while |D| <= |U| / 8 (:meth:`holds`). Measured on hertz3d at its
     defaults (52 steps, the candidate facets): 57 factors instead of 113 at 47k dofs (14.0-14.9 s against 15.5-15.6
     s a run), 58 instead of 123 at 106k (45.6 s against 54.6 s), the iterations the same and u equal to 3e-10.
+    Model B's active set does the like for its points (:class:`~workbench.schemes.halfspace.ModelFactor`, which also
+    borders its factor with points gained); here a gained dof makes a new factor.
 
     >>> x = np.linspace(0.0, 1.0, 16)
     >>> G = 1.0 / (1.0 + 10.0 * np.abs(x[:, None] - x[None, :]))  # (a compliance: falls with distance)
