@@ -26,8 +26,9 @@ Not for a glue or a friction (their forces act on the whole bonded side, not whe
 gap equal: nothing tells the points apart), a moving clamp, several processes, a solver that cannot keep dofs last
 (the banded and iterative ones), or error control. Model A's step operator a0 K_A + K_G changes with the step, so
 an error-controlled run factors it often, and a factorization that keeps the candidates costs about twice a plain
-one: measured on the hemisphere at 47k dofs with BDF2 at rtol = 1e-3 (373 steps, 113 factorizations), 356 s with
-the candidates against 277 s without (0.28 against 0.40 s a step, the factorizations 2.24 against 1.14 s each).
+one: measured on the hemisphere at 47k dofs with BDF2 at rtol = 1e-3 (389 solves, 67 factorizations), 230 s with
+the candidates against 228 s without (the factorizations 154 against 78 s, the rest 76 against 149 s): a tie, so
+they stay out (356 s against 277 s on the finer a0 grid of before, 113 factorizations).
 
 Measured with fixed steps on the hemisphere (``hertz3d`` at its defaults, 52 steps of backward Euler;
 ``python studies/model_a_candidates.py``, docs/schemes.md, "Model A's implicit steps on candidate facets"): at 47k
