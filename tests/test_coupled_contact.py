@@ -402,10 +402,11 @@ def test_the_springs_factor_is_updated_at_low_rank_and_stays_exact():
     """Model A's coupled Newton preconditions its springs' system by (I + J G_RR)^-1 J (J the springs' sparse
     Jacobian on the dofs R, G a dense compliance). A Newton step's springs differ from the last one's on a few dofs,
     so the LU factor of the bracket is kept and corrected by Woodbury's identity while R stays within the dofs U it
-    was made for and at most an eighth of U changed (:class:`~workbench.discrete.condensation.SpringsFactor`;
-    hertz3d at 106k dofs: 58 LU factors instead of 123, 45.6 s against 54.6 s, u equal to 3e-10). Checked here
-    against a dense solve, on a sequence of springs as a contact front makes them: released at the rim, stiffer,
-    coupled to a neighbour, and past the factor (a dof outside U, too many changed): made again."""
+    was made for (R and a margin where the front goes next) and at most a share of U changed
+    (:class:`~workbench.discrete.condensation.SpringsFactor`). Checked here against a dense solve, on a sequence of
+    springs as a contact front makes them: released at the rim, stiffer, coupled to a neighbour, gained in the margin
+    (the correction's columns kept from the last update), and past the factor (a dof outside U, too many changed):
+    made again."""
     import scipy.sparse as sp
 
     from workbench.discrete.condensation import SpringsFactor
@@ -438,8 +439,49 @@ def test_the_springs_factor_is_updated_at_low_rank_and_stays_exact():
     r1 = rng.standard_normal(R1.size)
     want = exact(J1, R1, r1)
     assert np.abs(F.solver()(r1) - want).max() <= 1e-11 * np.abs(want).max()
-    # a dof outside U, or more than U / 8 changed: not held (a new factor is made)
+    # made for more dofs U than its springs R (the margin, no springs there yet): the same solution; the two rim dofs
+    # then gained lie within U, and the columns of the rows that changed before are reused
+    F_margin = SpringsFactor(J1, R1, G, R0)
+    assert np.abs(F_margin.solver()(r1) - want).max() <= 1e-11 * np.abs(want).max()
+    assert F_margin.holds(J0, R0)
+    assert np.abs(F_margin.solver()(r0) - exact(J0, R0, r0)).max() <= 1e-11 * np.abs(exact(J0, R0, r0)).max()
+    assert F_margin._Z.shape[1] == 6  # (rows 5, 10, 11 and the three at the rim: each solved once)
+    # a dof outside U, or more than the share of U changed: not held (a new factor is made)
     F_small = SpringsFactor(J1, R1, G[np.ix_(R1, R1)])
     assert not F_small.holds(J0, R0)
-    J2 = (J0 + sp.diags(np.r_[np.ones(9), np.zeros(n - 9)])).tocsr()
+    changed = int(SpringsFactor.share * n) + 1
+    J2 = (J0 + sp.diags(np.r_[np.ones(changed), np.zeros(n - changed)])).tocsr()
     assert not F.holds(J2, R0)
+    J3 = (J0 + sp.diags(np.r_[np.ones(changed - 1), np.zeros(n - changed + 1)])).tocsr()
+    assert F.holds(J3, R0)
+    assert np.abs(F.solver()(r0) - exact(J3, R0, r0)).max() <= 1e-11 * np.abs(exact(J3, R0, r0)).max()
+
+
+def test_a_new_springs_factor_takes_the_dofs_nearest_to_contact_as_its_margin():
+    """:meth:`CoupledNewton._with_margin`: R and the share ``margin`` of dofs off R whose points have the least gap
+    left (g - u_nu), where the contact front goes next; never more than the half-space's ``largest``."""
+    import types
+
+    import scipy.sparse as sp
+
+    from workbench.discrete.condensation import CoupledNewton
+
+    n = 12  # (dofs on a line, a point between each two, the gap growing away from x = 5, faster to the left)
+    T = sp.lil_matrix((n - 1, n))
+    for q in range(n - 1):
+        T[q, q] = T[q, q + 1] = 0.5
+    x = np.arange(n - 1) + 0.5
+    gap = np.where(x < 5.0, 0.25 * (5.0 - x), 0.1 * (x - 5.0))
+    side = types.SimpleNamespace(T_nu=T.tocsr(), gap0=gap, u_nu=lambda u: T.tocsr() @ u)
+    newton = CoupledNewton(None, types.SimpleNamespace(side=side, size=n), halfspace=types.SimpleNamespace(largest=n))
+    newton.margin = 0.5
+    R = np.array([4, 5, 6, 7])
+    u = np.full(n, 0.05)  # (a uniform approach: the gaps' order stays; a dof's is its points' least)
+    assert newton._with_margin(R, u).tolist() == [4, 5, 6, 7, 8, 9]  # (dofs 8 and 9: 0.2 and 0.3 left)
+    newton.margin = 1.0
+    assert newton._with_margin(R, u).tolist() == [3, 4, 5, 6, 7, 8, 9, 10]  # (then dof 3, 0.325, and 10, 0.4)
+    u[:4] += 0.3  # (the left side comes nearer: dof 3 has 0.175 left, and goes first)
+    newton.margin = 0.5
+    assert newton._with_margin(R, u).tolist() == [3, 4, 5, 6, 7, 8]
+    newton.halfspace.largest = 5
+    assert newton._with_margin(R, u).tolist() == [3, 4, 5, 6, 7]

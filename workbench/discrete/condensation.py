@@ -31,7 +31,6 @@ Examples
 from __future__ import annotations
 
 import copy
-import functools
 
 import numpy as np
 import scipy.linalg as la
@@ -330,14 +329,17 @@ class SpringsFactor:
     compliance block the LU factor of I + J0 G0 was made with, on the dofs U it was made for.
 
     A Newton step's springs differ from the last one's on a few dofs D (the contact front: at 47k dofs on the
-    hemisphere, ~20 of 1100-1300 dofs gained in a step's first Newton iteration, 0-4 lost in its second). Where R lies
-    within U, the system on U with J embedded (its rows off R zero, so t = 0 there) is I + J0 G0 + E_D W, W = (J -
-    J0)_DU G0, and its solution is the factor's, corrected by Woodbury's identity: |D| solves with the factor and a
-    |D| x |D| LU, instead of a new factor, while |D| <= |U| / 8 (:meth:`holds`). Measured on hertz3d at its
-    defaults (52 steps, the candidate facets): 57 factors instead of 113 at 47k dofs (14.0-14.9 s against 15.5-15.6
-    s a run), 58 instead of 123 at 106k (45.6 s against 54.6 s), the iterations the same and u equal to 3e-10.
+    hemisphere, ~20 of 1100-1300 dofs gained in a step's first Newton iteration, 0-4 lost in its second). The factor
+    is made for dofs U beyond R (:class:`CoupledNewton` adds those nearest to contact, where the front goes next),
+    with no springs there yet. Where R lies within U, the system on U with J embedded (its rows off R zero, so t = 0
+    there) is I + J0 G0 + E_D W, W = (J - J0)_DU G0, and its solution is the factor's, corrected by Woodbury's
+    identity: the columns M0^-1 E_D (each solved once while the factor lasts) and a |D| x |D| LU, instead of a new
+    factor, while |D| <= :attr:`share` |U| (:meth:`holds`). Measured on hertz3d at its defaults (52 steps, the
+    candidate facets; one run each, on a machine about twice as slow as the one of the figures in the docs): at 47k
+    dofs 20 factors instead of 59 (the springs' work 0.9 s against 1.8 s), at 106k 20 instead of 58 (6.1 s against
+    14.5 s, the run 71.7 s against 81.9 s), the Newton iterations the same and u equal to 1e-12 of its largest.
     Model B's active set does the like for its points (:class:`~workbench.schemes.halfspace.ModelFactor`, which also
-    borders its factor with points gained); here a gained dof makes a new factor.
+    borders its factor with points gained).
 
     >>> x = np.linspace(0.0, 1.0, 16)
     >>> G = 1.0 / (1.0 + 10.0 * np.abs(x[:, None] - x[None, :]))  # (a compliance: falls with distance)
@@ -350,18 +352,37 @@ class SpringsFactor:
     (True, True)
     """
 
-    #: The most changed dofs a low-rank update takes, as a share of U (|D| solves with the factor cost
-    #: 2 |D| |U|^2 flops against a new factor's 2/3 |U|^3).
-    share = 0.125
+    #: The most changed dofs a low-rank update takes, as a share of U. Each changed dof's column M0^-1 e_i costs 2 |U|^2
+    #: flops once while the factor lasts, and an update |D|^2 (2 |U| + |D|) more, against a new factor's 2/3 |U|^3.
+    #: Measured on hertz3d at 106k dofs, with the margin: 20 factors at a quarter, 26 at an eighth.
+    share = 0.25
 
-    def __init__(self, J, R: np.ndarray, G: np.ndarray):
-        self.U, self.G, self.J0 = R.copy(), G, J.tocsr()
-        M = J @ G
+    def __init__(self, J, R: np.ndarray, G: np.ndarray, U: np.ndarray | None = None):
+        self.U, self.G = (R if U is None else U).copy(), G
+        self.J0 = self._embedded(J, R)[0]
+        M = self.J0 @ G
         M[np.diag_indices_from(M)] += 1.0
         # (M^T's factor, in place: M is C-ordered, so M^T is LAPACK's order and no third |U|^2 array is made)
         self.lu = la.lu_factor(M.T, overwrite_a=True, check_finite=False)
+        # M0^-1 e_i for the dofs i of U that changed since the factor, kept: they depend on the factor alone, and a
+        # dof that changed once stays changed for the next steps, as the front passes it
+        self._Z, self._column = np.empty((self.U.size, 0)), np.full(self.U.size, -1)
         self._last = None  # (the springs holds() last took: (positions of R in U, J on U, J - J0 on U, D))
         self.holds(J, R)
+
+    def _lu(self, b):
+        return la.lu_solve(self.lu, b, trans=1, check_finite=False)  # (M0 y = b from M0^T's factor)
+
+    def _columns(self, D: np.ndarray) -> np.ndarray:
+        """M0^-1 E_D, its columns solved once each while the factor lasts."""
+        new = D[self._column[D] < 0]
+        if new.size:
+            E = np.zeros((self.U.size, new.size))
+            E[new, np.arange(new.size)] = 1.0
+            start = self._Z.shape[1]
+            self._Z = np.hstack([self._Z, self._lu(E)])
+            self._column[new] = start + np.arange(new.size)
+        return self._Z[:, self._column[D]]
 
     def _embedded(self, J, R):
         """(J on U: rows and columns of U off R zero; the positions of R in U), or None where R is not within U."""
@@ -389,19 +410,15 @@ class SpringsFactor:
     def solver(self):
         """r (on R) -> (I + J G_RR)^-1 J r for the springs (J, R) that :meth:`holds` last took."""
         at, J_U, dJ, D = self._last
-        lu = functools.partial(la.lu_solve, self.lu, trans=1, check_finite=False)  # (M y = b from M^T's factor)
         correct = None
         if D.size:
-            W = dJ[D] @ self.G  # (|D| x |U|: the bracket on U is M0 + E_D W)
-            E = np.zeros((self.U.size, D.size))
-            E[D, np.arange(D.size)] = 1.0
-            Z = lu(E)
+            W, Z = dJ[D] @ self.G, self._columns(D)  # (|D| x |U|: the bracket on U is M0 + E_D W)
             correct = (Z, W, la.lu_factor(np.eye(D.size) + W @ Z, check_finite=False))
 
         def apply(r):
             y = np.zeros(self.U.size)
             y[at] = r
-            x = lu(J_U @ y)
+            x = self._lu(J_U @ y)
             if correct is not None:
                 Z, W, K = correct
                 x -= Z @ la.lu_solve(K, W @ x, check_finite=False)
@@ -448,12 +465,16 @@ class CoupledNewton:
     #: accuracy (with a stiff one to c_nu^-1 of u). Measured on hertz3d at 12k dofs, 10 steps: c_nu = 1e7, 109 -> 87
     #: Newton iterations, 1259 -> 994 inner, 8.7 -> 7.4 s against 1e-4; c_nu = 1e5, 387 -> 414 inner.
     start_inner = 1e-6
+    #: The dofs a new springs' factor is made for beyond R, as a share of R (:meth:`_with_margin`): a step's first
+    #: Newton iteration adds the dofs the front reaches, which then lie within the factor's dofs and update it at low
+    #: rank instead of making it anew.
+    margin = 0.125
 
     def __init__(self, schur: SchurOperator, operator: ContactOperator, rtol: float = 1e-10,
                  max_iterations: int = 40, halfspace=None):
         self.schur, self.op, self.rtol, self.max_iterations = schur, operator, rtol, max_iterations
         self.halfspace = halfspace
-        self._factor = None
+        self._factor = self._traces = None
         self.iterations = self.linear_iterations = 0
 
     def solve(self, u_C: np.ndarray, z_C: np.ndarray, time: float, label: str = "") -> np.ndarray:
@@ -529,10 +550,10 @@ class CoupledNewton:
         S_b = self.schur.apply(b)
         if R.size == 0:
             return S_b, b.copy()
-        found = self._in_forces(J[R][:, R], R, b, S_b, eta)
+        found = self._in_forces(J[R][:, R], R, b, S_b, eta, u_C)
         return found if found is not None else self._in_displacements(J, b, eta)
 
-    def _in_forces(self, J, R, b, S_b, eta):
+    def _in_forces(self, J, R, b, S_b, eta, u_C):
         """The direction from the springs' forces t = J s on the dofs R (J: J_RR, sparse; class docs); None should
         J_RR be singular."""
         S = self.schur
@@ -545,7 +566,7 @@ class CoupledNewton:
             spring = spla.splu(J.tocsc())
         except RuntimeError:
             return None
-        precondition = self._preconditioner(J, R)
+        precondition = self._preconditioner(J, R, u_C)
         t, S_t, p = np.zeros(R.size), np.zeros_like(b), np.zeros_like(b)
         r = S_b[R].copy()
         z = precondition(r)
@@ -570,14 +591,35 @@ class CoupledNewton:
         s_t[R] -= t
         return S_b - S_t, s_t
 
-    def _preconditioner(self, J, R):
+    def _preconditioner(self, J, R, u_C):
         """r -> (J_RR^-1 + c G_RR)^-1 r = (I + J_RR c G_RR)^-1 J_RR r (:class:`SpringsFactor`: an LU factor of the
-        bracket, 2/3 |R|^3 as G is dense and J sparse, updated at low rank while R stays within the springs it was
-        made for)."""
+        bracket, 2/3 |U|^3 as G is dense and J sparse, updated at low rank while R stays within the dofs U it was
+        made for: R and the :attr:`margin` nearest to contact at u_C, where the front goes next)."""
         if self._factor is None or not self._factor.holds(J, R):
-            G = self.halfspace.block(R, self.halfspace.scale(R, 1.0 / self.schur.stiffness[R]))  # (S0's diagonal's)
-            self._factor = SpringsFactor(J, R, G)
+            U = self._with_margin(R, u_C)
+            G = self.halfspace.block(U, self.halfspace.scale(U, 1.0 / self.schur.stiffness[U]))  # (S0's diagonal's)
+            self._factor = SpringsFactor(J, R, G, U)
         return self._factor.solver()
+
+    def _with_margin(self, R: np.ndarray, u_C: np.ndarray) -> np.ndarray:
+        """R and the :attr:`margin` of dofs off R nearest to contact at u_C (the least gap g - u_nu left at the points
+        they carry), sorted; no more than the half-space's ``largest`` in all."""
+        extra = min(int(np.ceil(self.margin * R.size)), self.halfspace.largest - R.size, self.op.size - R.size)
+        if extra <= 0:
+            return R
+        side = self.op.side
+        if self._traces is None:
+            T = abs(side.T_nu).tocsc()
+            T.eliminate_zeros()
+            self._traces = T
+        T = self._traces
+        left = (0.0 if side.gap0 is None else side.gap0) - side.u_nu(u_C)
+        nearest = np.full(self.op.size, np.inf)
+        carries = np.diff(T.indptr) > 0
+        nearest[carries] = np.minimum.reduceat(left[T.indices], T.indptr[:-1][carries])
+        nearest[R] = np.inf
+        chosen = np.argpartition(nearest, extra - 1)[:extra]
+        return np.union1d(R, chosen[np.isfinite(nearest[chosen])])
 
     def _in_displacements(self, J, b, eta):
         """(s, S0^{-1} s) with (S0^{-1} + J) s = b, by conjugate gradients preconditioned by S0 (class docs)."""
