@@ -331,13 +331,14 @@ class SpringsFactor:
     A Newton step's springs differ from the last one's on a few dofs D (the contact front: at 47k dofs on the
     hemisphere, ~20 of 1100-1300 dofs gained in a step's first Newton iteration, 0-4 lost in its second). The factor
     is made for dofs U beyond R (:class:`CoupledNewton` adds those nearest to contact, where the front goes next),
-    with no springs there yet. Where R lies within U, the system on U with J embedded (its rows off R zero, so t = 0
-    there) is I + J0 G0 + E_D W, W = (J - J0)_DU G0, and its solution is the factor's, corrected by Woodbury's
-    identity: the columns M0^-1 E_D (each solved once while the factor lasts) and a |D| x |D| LU, instead of a new
-    factor, while |D| <= :attr:`share` |U| (:meth:`holds`). Measured on hertz3d at its defaults (52 steps, the
-    candidate facets; one run each, on a machine about twice as slow as the one of the figures in the docs): at 47k
-    dofs 20 factors instead of 59 (the springs' work 0.9 s against 1.8 s), at 106k 20 instead of 58 (6.1 s against
-    14.5 s, the run 71.7 s against 81.9 s), the Newton iterations the same and u equal to 1e-12 of its largest.
+    with no springs there yet: their rows of the bracket are the identity's, so only its block on R is factored.
+    Where R lies within U, the system on U with J embedded (its rows off R zero, so t = 0 there) is I + J0 G0 + E_D W,
+    W = (J - J0)_DU G0, and its solution is the factor's, corrected by Woodbury's identity: the columns M0^-1 E_D
+    (each solved once while the factor lasts) and a |D| x |D| LU, instead of a new factor, while |D| <= :attr:`share`
+    |U| (:meth:`holds`). Measured on hertz3d at its defaults (52 steps, the candidate facets; one run each; docs/
+    schemes.md, "Model A's implicit steps on candidate facets"): at 47k dofs 20 factors instead of 59 (the springs'
+    work 0.9-1.1 s against 1.8 s), at 106k 20 instead of 58 (6.1-7.0 s against 14.5 s; a step 0.51 s against 0.69
+    s), the Newton iterations the same and u equal to 1e-12 of its largest.
     Model B's active set does the like for its points (:class:`~workbench.schemes.halfspace.ModelFactor`, which also
     borders its factor with points gained).
 
@@ -359,19 +360,28 @@ class SpringsFactor:
 
     def __init__(self, J, R: np.ndarray, G: np.ndarray, U: np.ndarray | None = None):
         self.U, self.G = (R if U is None else U).copy(), G
-        self.J0 = self._embedded(J, R)[0]
-        M = self.J0 @ G
-        M[np.diag_indices_from(M)] += 1.0
-        # (M^T's factor, in place: M is C-ordered, so M^T is LAPACK's order and no third |U|^2 array is made)
-        self.lu = la.lu_factor(M.T, overwrite_a=True, check_finite=False)
+        self.J0, self._r = self._embedded(J, R)
+        self._m = np.setdiff1d(np.arange(self.U.size), self._r)
+        # M0 = I + J0 G has identity rows off R (no springs there yet): in the order (R, margin) it is [[A, B], [0, I]]
+        # with A = I + J G_RR and B = J G_R,margin, so only A is factored and the margin costs no factor work
+        J = J.tocsr()
+        A = J @ G[np.ix_(self._r, self._r)]
+        A[np.diag_indices_from(A)] += 1.0
+        self._B = J @ G[np.ix_(self._r, self._m)]
+        # (A^T's factor, in place: A is C-ordered, so A^T is LAPACK's order and no further |R|^2 array is made)
+        self.lu = la.lu_factor(A.T, overwrite_a=True, check_finite=False)
         # M0^-1 e_i for the dofs i of U that changed since the factor, kept: they depend on the factor alone, and a
         # dof that changed once stays changed for the next steps, as the front passes it
         self._Z, self._column = np.empty((self.U.size, 0)), np.full(self.U.size, -1)
         self._last = None  # (the springs holds() last took: (positions of R in U, J on U, J - J0 on U, D))
         self.holds(J, R)
 
-    def _lu(self, b):
-        return la.lu_solve(self.lu, b, trans=1, check_finite=False)  # (M0 y = b from M0^T's factor)
+    def _lu(self, b: np.ndarray) -> np.ndarray:
+        """M0^-1 b (a vector or columns on U): b off R as it is, and A x_R = b_R - B b_margin (A y = c from A^T's
+        factor)."""
+        x = b.copy()
+        x[self._r] = la.lu_solve(self.lu, b[self._r] - self._B @ b[self._m], trans=1, check_finite=False)
+        return x
 
     def _columns(self, D: np.ndarray) -> np.ndarray:
         """M0^-1 E_D, its columns solved once each while the factor lasts."""

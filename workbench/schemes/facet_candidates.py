@@ -32,8 +32,9 @@ they stay out (356 s against 277 s on the finer a0 grid of before, 113 factoriza
 
 Measured with fixed steps on the hemisphere (``hertz3d`` at its defaults, 52 steps of backward Euler;
 ``python studies/model_a_candidates.py``, docs/schemes.md, "Model A's implicit steps on candidate facets"): at 47k
-dofs 13.4 s against 37.9 s for the coupled solver on the whole side, at 106k 44.0 s against 110.2 s, at 193k (where
-the zone outgrows the candidates) 234 s against 315 s; equal to 4e-10.
+dofs 23.2 s against 49.0 s for the coupled solver on the whole side, at 106k 74.6 s against 140.0 s, at 193k (where
+the zone outgrows the candidates) 420 s against 487 s; equal to 4e-10 (a machine about twice as slow as the one that
+gave 13.4, 44.0 and 234 s against 37.9, 110.2 and 315 s).
 """
 from __future__ import annotations
 
