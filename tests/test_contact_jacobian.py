@@ -10,6 +10,8 @@ p_nu(r) = c_nu (r_+)^m_nu: the implicit scheme is checked for m_nu = 1.5, 2, 3 a
 rod ODE (docs/models.md, Appendix A; scipy Radau, independent of the schemes) and against the explicit scheme
 at a small step on the slab.
 """
+import copy
+
 import numpy as np
 import pytest
 
@@ -56,6 +58,33 @@ def test_contact_jacobian_equals_finite_differences(name, overrides):
         np.testing.assert_allclose(J, fd, rtol=0, atol=1e-6 * scale)
         largest = max(largest, np.abs(fd).max())
     assert largest > 1e-2  # the states exercise the terms
+
+
+@pytest.mark.parametrize("name, overrides", [
+    ("slab", dict(h=0.1, ny=1, order=2, c_nu=7.0, m_nu=2.0, gamma_nu=2.0, L=0.3, c_tau=3.0)),
+    ("block", dict(h=0.25, c_nu=7.0, m_nu=2.0, gamma_nu=2.0, L=0.3, c_tau=3.0)),
+])
+def test_a_small_side_computes_with_dense_traces_as_with_sparse_ones(name, overrides):
+    """A restricted contact side of few points and dofs (:data:`workbench.discrete.boundary.DENSE_TRACES`) keeps its
+    traces dense, where SciPy's sparse products cost more in overhead than in work: its u_nu, u_tau, forces and
+    Jacobians (dense and sparse) are the sparse traces' to round-off."""
+    d = discretisation.build(workbench.scene(name, **overrides))
+    op = ContactOperator(d)
+    dense = op.side
+    assert dense._dense is not None  # (the path the other tests of this module take)
+    sparse = copy.copy(dense)
+    sparse._dense = None
+    rng = np.random.default_rng(5)
+    for _ in range(3):
+        u_C = random_state(op, d, rng, scale=0.5)
+        for side in (dense, sparse):
+            op.side = side
+            side.result = (side.u_nu(u_C), side.u_tau(u_C), op.force(u_C), op.jacobian(u_C),
+                           op.jacobian(u_C, dense=False).toarray())
+        for a, b in zip(dense.result, sparse.result):
+            assert a.shape == b.shape
+            np.testing.assert_allclose(a, b, rtol=0, atol=1e-13 * max(np.abs(b).max(), 1.0))
+        assert np.abs(sparse.result[3]).max() > 1e-2  # (the states exercise the terms)
 
 
 ROD_PUSHED = dict(h=0.1, T=1.0, c_nu=5.0, gamma_nu=0.3, L=0.3, delta="0.2*sin(pi*t)", u0="0")
