@@ -297,6 +297,21 @@ def test_restarts_and_checkpoints_across_process_counts(tmp_path):
 
 
 @pytest.mark.mpi
+def test_a_distributed_run_starts_mpi_polling_less_unless_the_user_said_otherwise(tmp_path):
+    """Before MPI starts, world() sets MPICH's progress throttle (workbench.parallel.MPI_ENVIRONMENT: waiting ranks
+    poll less and leave the cores to those that compute), and keeps a value the user gave (here rank 1's)."""
+    script = tmp_path / "env.py"
+    script.write_text("import os, sys\nfrom workbench.parallel import world\nw = world()\nassert 'mpi4py.MPI' in "
+                      "sys.modules and w.size == 2\nprint(w.rank, os.environ['MPIR_CVAR_CH4_PROGRESS_THROTTLE'])\n")
+    env = {key: value for key, value in alone().items() if not key.startswith("MPIR_CVAR_")}
+    p = subprocess.run([_mpiexec(), "-n", "1", sys.executable, str(script), ":", "-n", "1", "-env",
+                        "MPIR_CVAR_CH4_PROGRESS_THROTTLE", "0", sys.executable, str(script)], capture_output=True,
+                       text=True, env=env, timeout=120, cwd=tmp_path)
+    assert p.returncode == 0, p.stderr
+    assert sorted(p.stdout.split("\n")[:2]) == ["0 1", "1 0"], p.stdout
+
+
+@pytest.mark.mpi
 def test_an_error_on_one_rank_ends_every_rank(tmp_path):
     """An unexpected error on rank 0 alone (injected in its serial view's setup) while rank 1 waits for it in an
     exchange: the command prints the traceback, says which rank failed and ends the job with a non-zero code, at once

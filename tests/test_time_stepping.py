@@ -171,7 +171,9 @@ def slab_reference():
 
 
 @pytest.mark.slow
-@pytest.mark.parametrize("scheme, tolerances", [("bdf2", TOLERANCES[:3]), ("implicit", TOLERANCES[:2])])
+# (backward Euler's steps grow like 1/rtol: 1616 at 1e-2, 16,124 at 1e-3, which took 80 s of the suite; 3e-3 takes
+# about 5000, a factor of 3.3 in rtol for the error to fall by)
+@pytest.mark.parametrize("scheme, tolerances", [("bdf2", TOLERANCES[:3]), ("implicit", [1e-2, 3e-3])])
 def test_achieved_error_follows_the_tolerance_on_the_slab(slab_reference, scheme, tolerances):
     """Debonding slab with contact, glue and a load on half the top: the tip error and the beta error within
     [0.1, 10] x rtol, falling with it; the Dataset records every step size and estimate."""
