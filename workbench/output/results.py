@@ -25,6 +25,7 @@ schema stores only str, int, float.
 """
 from __future__ import annotations
 
+import functools
 import json
 import os
 import time as _time
@@ -114,15 +115,23 @@ def attr_value(value):
 
 
 def versions() -> dict:
+    """The versions of the packages a run's numbers depend on, as attributes (``version_NAME``)."""
+    return dict(_versions())
+
+
+@functools.lru_cache(maxsize=1)
+def _versions() -> tuple:
+    """Read once per process: the packages' metadata is read from disk (6 reads, 20 ms; 0.8 s of a 1000-step run with
+    40 checkpoints), and the code that runs is the one this process imported, whatever is installed later."""
     import importlib.metadata as md
 
-    out = {}
+    out = []
     for pkg in ("workbench", "ngsolve", "numpy", "scipy", "xarray", "netCDF4"):
         try:
-            out[f"version_{pkg}"] = md.version(pkg)
+            out.append((f"version_{pkg}", md.version(pkg)))
         except md.PackageNotFoundError:
-            out[f"version_{pkg}"] = "unknown"
-    return out
+            out.append((f"version_{pkg}", "unknown"))
+    return tuple(out)
 
 
 class Recorder:

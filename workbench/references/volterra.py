@@ -357,7 +357,7 @@ def solve_prony(*, a, moduli, taus, delta, T, ell=1.0, F, c, g, rtol=1e-10, atol
     method : {"DOP853", "Radau", "RK45", "LSODA", ...}, optional
         ``solve_ivp`` method.
     max_step : float, optional
-        Largest step; default ``T / 5000``.
+        Largest step; default ``T / 1000``.
 
     Returns
     -------
@@ -391,7 +391,9 @@ def _check_prony(T, moduli, taus, rtol, atol, max_step, delta):
         raise ValueError(f"taus must all be > 0 (allowed range: (0, inf)), got {taus}")
     _positive("rtol", rtol)
     _positive("atol", atol)
-    max_step = T / 5000.0 if max_step is None else _positive("max_step", max_step)
+    # (T / 1000 agrees with T / 5000 to 3e-11 of max |A| on memory_rod, also with T = 2 and a load 0.15 sin(6 pi t),
+    # in a fifth of the time: 0.9-1.0 s against 4.1-4.2 s; T / 500 differed by up to 6e-10)
+    max_step = T / 1000.0 if max_step is None else _positive("max_step", max_step)
     _check_callable("delta", delta, 0.0)
     return T, moduli, taus, max_step
 

@@ -81,10 +81,12 @@ def attach(ds: xr.Dataset, state: dict) -> xr.Dataset:
     """``ds`` with ``state`` (:func:`capture`) as ``state_*`` variables and the ``state_json`` attribute."""
     arrays, meta = _encode(state)
     described = STATE_VARIABLES | state.get("variables", {})
+    variables = {}
     for name, (dims, data) in arrays.items():
         units, long_name = described.get(name, ("", f"restart state: {name}"))
         cf = {"long_name": long_name} | ({"units": units} if units else {})
-        ds[PREFIX + name] = xr.Variable(dims, data, attrs=cf)
+        variables[PREFIX + name] = xr.Variable(dims, data, attrs=cf)
+    ds.update(variables)  # (in one merge: one per variable took 33 ms a checkpoint on tp5, 6 variables)
     ds.attrs[ATTR] = json.dumps(meta)
     return ds
 
