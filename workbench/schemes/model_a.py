@@ -19,7 +19,7 @@ from __future__ import annotations
 import numpy as np
 
 from ..physics.ops import NP
-from .base import Observer, Scheme, crossed_fraction, first_event
+from .base import Observer, Scheme, events
 
 
 class KelvinVoigtScheme(Scheme):
@@ -77,7 +77,7 @@ def kink_event(d, start: dict, beta) -> tuple:
     """(theta, crossed) of the step from the state ``start`` to the current one (:meth:`ErrorControlled.event`)."""
     before = kinks(d, start["u"], start["beta"])
     after = kinks(d, d.u.vec.FV().NumPy(), beta)
-    return first_event(before, after, d.world), crossed_fraction(before, after, d.world)
+    return events(before, after, d.world)
 
 
 class KelvinVoigtObserver(Observer):
