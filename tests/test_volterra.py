@@ -231,6 +231,29 @@ def test_quadrature_converges_to_prony_at_second_order(scene_reference, order_of
     assert errs["A"][-1] < 1e-5
 
 
+@pytest.mark.parametrize("pars", [SCENE, dict(SCENE, g=0.0, F=0.0)])
+def test_each_quadrature_step_solves_the_inclusion_with_its_memory(pars):
+    """Every step of the trapezoidal march (n = 400, all four states; and Signorini) is contact_response's closed form
+    at the memory h_j^- that the product rule gives for the strains before it, computed here again as one matrix
+    product: A, sigma, w and the state, at every step."""
+    n = 400
+    run = solve_quadrature(kernel=scene_kernel, delta=scene_delta, T=T_END, n=n, **pars)
+    k, t = T_END / n, run.t
+    b = scene_kernel(t)
+    lags = np.subtract.outer(np.arange(n + 1), np.arange(n + 1))
+    weights = np.where(lags > 0, scene_kernel(k * np.maximum(lags, 0)), 0.0)  # b(t_j - t_i), i < j
+    weights[:, 0] *= 0.5
+    h = k * weights @ run.A
+    a_eff = pars["a"] + 0.5 * k * b[0]
+    A, sigma, w, state = contact_response(h[1:], scene_delta(t[1:]), **(pars | {"a": a_eff}))
+    np.testing.assert_allclose(run.A[1:], A, rtol=0, atol=1e-14)
+    np.testing.assert_allclose(run.sigma[1:], sigma, rtol=0, atol=1e-14)
+    np.testing.assert_allclose(run.w[1:], w, rtol=0, atol=1e-14)
+    assert np.array_equal(run.state[1:], state)
+    if pars["g"] > 0:
+        assert set(np.unique(run.state)) == {0, 1, 2, 3}
+
+
 def test_signorini_case_g_zero():
     """Reference: Signorini conditions w <= 0, sigma <= 0, w sigma = 0 (g = 0), and the
     quadrature solver (n = 800) for the same kernel, which must agree to < 1e-5."""

