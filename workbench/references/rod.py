@@ -99,14 +99,19 @@ def rod_ode(scene, rtol=1e-11, atol=1e-13, model=None):
     a, b, law = model.elastic.modulus, model.viscous.modulus, model.bonding
     rhs = _rod_rhs(delta, ell, a, b, terms, law)
 
-    # The right-hand side is only Lipschitz (kinks at end = 0, +-L, g): limit the step
-    # so kinks are resolved; Radau's error control then does the rest. (T / 200 agrees with T / 2000 to 4e-12 on
-    # tp1, tp2, tp3, tp2 with gamma_nu = 1.5, L = 0.2, and the rod under 0.3 sin(2 pi t), in 1/10 to 1/3 of the time:
-    # 2000 steps took 1.5-1.7 s, where the error control alone takes 150-770; tp3's kinks take 4500 either way)
+    # The right-hand side is only Lipschitz (kinks at end = 0, +-L, g): limit the step so kinks are resolved;
+    # Radau's error control then does the rest. How short the step must be at a kink depends on how stiff the laws
+    # make the rod, rate = (a + length (c_nu + gamma_nu)) / b. Measured against T/2000 (which agrees with T/20000 at
+    # rtol 1e-12 to 2e-12): T/200 agrees to 4e-12 on tp1, tp2, tp3, tp2 with gamma_nu = 1.5, and the rod under
+    # 0.3 sin(2 pi t) with c_nu up to 1000 (rate * T/200 <= 5), in 1/10 to 1/3 of the time (2000 steps took 1.5-2 s);
+    # but by 8e-11 with c_nu = 1e5 and 2e-10 with c_nu = 1e7, b = 0.01. So T/200 where rate * T/200 <= 10.
     T = scene["T"]
     beta0 = model.beta0 if law is not None else 1.0
+    comp, pull = terms.get("compliance"), terms.get("adhesion")
+    stiffness = (a + ell * ((comp.c_nu if comp else 0.0) + (pull.gamma_nu if pull else 0.0))) / b
+    max_step = T / 200 if stiffness * T / 200 <= 10.0 else T / 2000
     sol = solve_ivp(rhs, (0.0, T), [0.0, beta0], method="Radau", rtol=rtol, atol=atol, dense_output=True,
-                    max_step=T / 200)
+                    max_step=max_step)
     if not sol.success:
         raise RuntimeError(f"reference ODE failed: {sol.message}")
 
