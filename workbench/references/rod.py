@@ -101,10 +101,11 @@ def rod_ode(scene, rtol=1e-11, atol=1e-13, model=None):
 
     # The right-hand side is only Lipschitz (kinks at end = 0, +-L, g): limit the step so kinks are resolved;
     # Radau's error control then does the rest. How short the step must be at a kink depends on how stiff the laws
-    # make the rod, rate = (a + length (c_nu + gamma_nu)) / b. Measured against T/2000 (which agrees with T/20000 at
-    # rtol 1e-12 to 2e-12): T/200 agrees to 4e-12 on tp1, tp2, tp3, tp2 with gamma_nu = 1.5, and the rod under
-    # 0.3 sin(2 pi t) with c_nu up to 1000 (rate * T/200 <= 5), in 1/10 to 1/3 of the time (2000 steps took 1.5-2 s);
-    # but by 8e-11 with c_nu = 1e5 and 2e-10 with c_nu = 1e7, b = 0.01. So T/200 where rate * T/200 <= 10.
+    # make the rod, rate = (a + length (c_nu + gamma_nu)) / b. Against T/20000 at rtol 1e-12, of max |y|
+    # (studies/reference_steps.py, data/references/reference_steps.csv): T/200 is within 1.5e-12 on tp1, tp2 (also
+    # with gamma_nu = 1.5) and 1.4e-11 on the rod under 0.3 sin(2 pi t) with c_nu = 1000 (rate * T/200 = 5), in 1/10
+    # to 1/3 of the time of T/2000 (1.6-1.8 s); on tp3 both are within 3e-10. With c_nu = 1e5 and 1e7 (b = 0.01)
+    # T/200 is 2.6e-10 and 7.4e-10 off where T/2000 is 6e-12 and 1e-13: so T/200 only where rate * T/200 <= 10.
     T = scene["T"]
     beta0 = model.beta0 if law is not None else 1.0
     comp, pull = terms.get("compliance"), terms.get("adhesion")

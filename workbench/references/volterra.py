@@ -391,8 +391,8 @@ def _check_prony(T, moduli, taus, rtol, atol, max_step, delta):
         raise ValueError(f"taus must all be > 0 (allowed range: (0, inf)), got {taus}")
     _positive("rtol", rtol)
     _positive("atol", atol)
-    # (T / 1000 agrees with T / 5000 to 3e-11 of max |A| on memory_rod, also with T = 2 and a load 0.15 sin(6 pi t),
-    # in a fifth of the time: 0.9-1.0 s against 4.1-4.2 s; T / 500 differed by up to 6e-10)
+    # (T / 1000 agrees with T / 5000 to 2.6e-10 of max |A| on memory_rod, also with T = 2 and a load 0.15 sin(6 pi t),
+    # in a fifth of the time, 0.95 s against 4.3 s; T / 500 differed by up to 4.3e-9: studies/reference_steps.py)
     max_step = T / 1000.0 if max_step is None else _positive("max_step", max_step)
     _check_callable("delta", delta, 0.0)
     return T, moduli, taus, max_step
