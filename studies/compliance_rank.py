@@ -13,7 +13,9 @@ Per level of h_contact: ``hertz3d`` runs at its defaults (one thread); the compl
 factorization keeps (the inverse of their condensed stiffness, exact) and the candidates' positions are taken.
 The points are split in halves along their longest extent, recursively, down to 64 points; each pair of halves'
 block of G gets its singular values. Per level of that tree: the blocks, their size, and the largest and mean rank
-at each relative tolerance (singular values above tol x ||G||_2). ``storage``: the entries of a HODLR
+at each relative tolerance (singular values above tol x ||G||_2; ``norm_over_diagonal``: ||G||_2 over G's largest
+diagonal entry, large as every candidate moves under a load at any one of them, so a tolerance relative to the
+norm is that many times looser against the entries near the diagonal). ``storage``: the entries of a HODLR
 representation at that tolerance (the ranks' factors, the leaves dense) over the n^2 of the dense G. Writes
 ``compliance_rank.csv`` (about 3 minutes at the default levels).
 """
@@ -95,14 +97,16 @@ def main():
         G, x, ndof = compliance(hc)
         tree = ranks(G, x)
         share = storage(tree, len(G))
+        spread = float(np.linalg.norm(G, 2) / G.diagonal().max())
         for level, blocks in sorted(tree.items()):
             r = np.array([b[2] for b in blocks])
             for i, tol in enumerate(TOLERANCES):
                 rows.append(dict(h_contact=hc, ndof=ndof, candidates=len(G), level=level, blocks=len(blocks),
                                  size=blocks[0][0], tol=tol, max_rank=int(r[:, i].max()),
-                                 mean_rank=round(float(r[:, i].mean()), 1), storage=share[i]))
-        print(f"h_contact {hc}: {ndof} dofs, {len(G)} candidates; HODLR storage over n^2 at tolerances "
-              f"{list(TOLERANCES)}: {share}", flush=True)
+                                 mean_rank=round(float(r[:, i].mean()), 1), storage=share[i],
+                                 norm_over_diagonal=round(spread, 1)))
+        print(f"h_contact {hc}: {ndof} dofs, {len(G)} candidates, ||G||_2 / max diag {spread:.0f}; HODLR storage at "
+              f"tolerances {list(TOLERANCES)}, over n^2: {share}", flush=True)
         for level, blocks in sorted(tree.items()):
             r = np.array([b[2] for b in blocks])
             print(f"  level {level}: {len(blocks)} blocks of {blocks[0][0]} points, largest ranks "
