@@ -1,14 +1,15 @@
 """A hierarchical (HODLR) preconditioner for Model A's springs' system, prototyped against the dense factor.
 
-    python studies/springs_hodlr.py [--out data/contact_solver] [--levels 0.005 0.0035] [--call 0.95]
+    python studies/springs_hodlr.py [--out data/contact_solver] [--levels 0.005 0.0035 0.0025] [--call 0.95]
 
 Model A's Newton directions on candidate facets solve (J^-1 + S_RR) t = (S b)_R by conjugate gradients
 (:class:`workbench.discrete.condensation.CoupledNewton`, S the candidates' compliance G, exact and dense), with the
 preconditioner (I + J G_RR)^-1 J: a dense LU factor of 2/3 |R|^3, updated at low rank between factors. This study
 asks what a compressed G would give instead. Per level of h_contact, ``hertz3d`` runs at its defaults (one thread)
-and one springs' system late in the run (the ``--call`` share of its Newton directions) is taken as the run built
-it: G, J, R, b. On it, each preconditioner below is made, applied and used by the same conjugate gradients to the
-run's tolerance:
+and one springs' system late in the run is taken as the run built it: G, J, R, b (the ``--call`` share of its
+Newton directions on the candidates; at 193k dofs the zone outgrows them late in the run, and the coupled solver's
+systems after that are not taken). On it, each preconditioner below is made, applied and used by the same
+conjugate gradients to the run's tolerance:
 
 * ``dense``: the LU factor of I + J G_RR, as the package makes it (one iteration: it is exact);
 * ``dense, lumped J``: the same with J replaced by the diagonal of its row sums (is J's coupling needed?);
@@ -18,7 +19,8 @@ run's tolerance:
   J's couplings out of x (its halo H) times the exact G_Hy, so its rank is G's plus |H|.
 
 Per row: |R|, the one-time compression, the factor, one application, the iterations, and t's largest difference
-from the dense preconditioner's, over t's largest. Writes ``springs_hodlr.csv`` (about 3 minutes at the defaults).
+from the dense preconditioner's, over t's largest. Writes ``springs_hodlr.csv`` (about 12 minutes at the defaults,
+8 of them and 3.7 GB for 193k dofs).
 This is a prototype in NumPy, measured to decide whether to build it (docs/schemes.md), not a solver of the package.
 """
 from __future__ import annotations
@@ -41,13 +43,14 @@ def captured(h_contact: float, share: float) -> dict:
     from threadpoolctl import threadpool_limits
 
     import workbench
-    from workbench.discrete.condensation import CoupledNewton
+    from workbench.discrete.condensation import CoupledNewton, DenseSchur
 
     calls, original = [], CoupledNewton._in_forces
 
     def in_forces(self, J, R, b, S_b, eta, u_C):
-        calls.append(dict(G=self.schur.compliance, J=J.tocsr(), R=R, b=b, S_b=S_b, eta=eta,
-                          points=self.op.dof_points()[0]))
+        if isinstance(self.schur, DenseSchur):  # (the candidates' exact compliance, not the coupled solver's)
+            calls.append(dict(G=self.schur.compliance, J=J.tocsr(), R=R, b=b, S_b=S_b, eta=eta,
+                              points=self.op.dof_points()[0]))
         return original(self, J, R, b, S_b, eta, u_C)
 
     CoupledNewton._in_forces = in_forces
@@ -195,7 +198,7 @@ def timed(make, probe):
 def main():
     p = argparse.ArgumentParser(description=__doc__.splitlines()[0])
     p.add_argument("--out", default="data/contact_solver")
-    p.add_argument("--levels", type=float, nargs="+", default=[0.005, 0.0035])
+    p.add_argument("--levels", type=float, nargs="+", default=[0.005, 0.0035, 0.0025])
     p.add_argument("--call", type=float, default=0.95, help="which springs' system, as a share of the run's")
     args = p.parse_args()
     rows = []
