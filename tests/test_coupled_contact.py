@@ -409,7 +409,7 @@ def test_the_springs_factor_is_updated_at_low_rank_and_stays_exact():
     made again."""
     import scipy.sparse as sp
 
-    from workbench.discrete.condensation import SpringsFactor
+    from workbench.discrete.springs import SpringsFactor
 
     rng = np.random.default_rng(7)
     n = 64
@@ -445,7 +445,7 @@ def test_the_springs_factor_is_updated_at_low_rank_and_stays_exact():
     assert np.abs(F_margin.solver()(r1) - want).max() <= 1e-11 * np.abs(want).max()
     assert F_margin.holds(J0, R0)
     assert np.abs(F_margin.solver()(r0) - exact(J0, R0, r0)).max() <= 1e-11 * np.abs(exact(J0, R0, r0)).max()
-    assert F_margin._Z.shape[1] == 6  # (rows 5, 10, 11 and the three at the rim: each solved once)
+    assert F_margin.columns == 6  # (rows 5, 10, 11 and the three at the rim: each solved once)
     # a dof outside U, or more than the share of U changed: not held (a new factor is made)
     F_small = SpringsFactor(J1, R1, G[np.ix_(R1, R1)])
     assert not F_small.holds(J0, R0)
@@ -455,6 +455,49 @@ def test_the_springs_factor_is_updated_at_low_rank_and_stays_exact():
     J3 = (J0 + sp.diags(np.r_[np.ones(changed - 1), np.zeros(n - changed + 1)])).tocsr()
     assert F.holds(J3, R0)
     assert np.abs(F.solver()(r0) - exact(J3, R0, r0)).max() <= 1e-11 * np.abs(exact(J3, R0, r0)).max()
+
+
+def test_a_springs_factor_on_the_whole_compliance_grows_with_the_front_and_stays_exact():
+    """Given the compliance of every dof (``whole``: the candidates' exact one), the springs' factor takes the dofs
+    the front reaches beyond U into U instead of being made again (their rows of I + J0 G are the identity's), and
+    keeps the rows (J - J0)_i G of its update while they hold. Checked against a dense solve on a front that grows
+    past U twice, a row kept across a growth and changed again later, a spring released; one factor throughout,
+    each changed dof's column solved once; then more than the share of U changed: not held."""
+    import scipy.sparse as sp
+
+    from workbench.discrete.springs import SpringsFactor
+
+    rng = np.random.default_rng(11)
+    n = 80
+    x = rng.uniform(0.0, 1.0, (n, 2))
+    G = np.asfortranarray(1.0 / (0.05 + np.linalg.norm(x[:, None] - x[None, :], axis=2)))  # (F-ordered, as LAPACK's)
+
+    def springs(R, stiff):  # (each dof coupled to the next in R's order: SPD, sparse)
+        return sp.csr_matrix(sp.diags([np.full(R.size - 1, -1.0), stiff, np.full(R.size - 1, -1.0)], [-1, 0, 1]))
+
+    def check(F, J, R):
+        assert F.holds(J, R)
+        r = rng.standard_normal(R.size)
+        want = np.linalg.solve(np.eye(R.size) + J @ G[np.ix_(R, R)], J @ r)
+        assert np.abs(F.solver()(r) - want).max() <= 1e-11 * np.abs(want).max()
+
+    R0, U0 = np.arange(60), np.arange(64)  # (R and a margin of 4)
+    F = SpringsFactor(springs(R0, np.full(60, 3.0)), R0, G, U0, whole=True)
+    lu = F.lu
+    stiff = np.full(60, 3.0)
+    stiff[3] = 5.0  # (one row changed: its row of the update made)
+    check(F, springs(R0, stiff), R0)
+    R1 = np.arange(68)  # (the front past U: dofs 64-67 grown into it; dof 3's row kept, and grown with U)
+    stiff1 = np.r_[stiff, np.full(8, 3.0)]
+    check(F, springs(R1, stiff1), R1)
+    assert F.U.size == 68 and F.columns == 10  # (dof 3, 59 (now coupled to 60) and 60-67)
+    R2 = np.arange(1, 71)  # (past it again: 68-70; dof 0 released, dof 3 stiffer still)
+    stiff2 = np.r_[stiff1[1:], np.full(3, 3.0)]
+    stiff2[2] = 6.0
+    check(F, springs(R2, stiff2), R2)
+    assert F.lu is lu and F.U.size == 71 and F.columns == 15  # (one factor; dofs 0, 1 (its neighbour gone), 68-70)
+    many = int(SpringsFactor.share * F.U.size) + 1
+    assert not F.holds(springs(R2, stiff2 + np.r_[np.ones(many), np.zeros(R2.size - many)]), R2)
 
 
 def test_a_new_springs_factor_takes_the_dofs_nearest_to_contact_as_its_margin():

@@ -41,6 +41,7 @@ from ..errors import NewtonFailed
 from ..physics.ops import NP
 from .boundary import contact_dofs
 from .solvers import inverse
+from .springs import SpringsFactor
 
 
 class ContactOperator:
@@ -198,17 +199,17 @@ class DenseSchur:
     diagonal of S^-1, exactly.
 
     It also serves :class:`CoupledNewton` as its ``halfspace``: the springs' system is then preconditioned by its
-    own inverse, and its conjugate gradients end after one iteration (:meth:`block`, :meth:`scale`).
+    own inverse, and its conjugate gradients end after one iteration (:meth:`springs_compliance`).
 
     >>> S = DenseSchur(np.array([[2.0, -1.0], [-1.0, 2.0]]))
-    >>> S.apply(np.array([3.0, 0.0])).round(12).tolist(), S.stiffness.tolist(), S.block(np.array([1])).round(6).tolist()
-    ([2.0, 1.0], [2.0, 2.0], [[0.666667]])
+    >>> S.apply(np.array([3.0, 0.0])).round(12).tolist(), S.stiffness.tolist()
+    ([2.0, 1.0], [2.0, 2.0])
     """
 
     def __init__(self, stiffness: np.ndarray):
         self.compliance = inverse(stiffness)
         self.stiffness = np.diag(stiffness).copy()
-        self.largest = len(stiffness)  # (every set of springs: the block is cut, never computed)
+        self.largest = len(stiffness)  # (every set of springs: read in place, never computed)
         self.applications = 0
 
     def apply(self, x: np.ndarray) -> np.ndarray:
@@ -216,15 +217,11 @@ class DenseSchur:
         self.applications += 1
         return self.compliance @ x
 
-    def block(self, U: np.ndarray, scale: float = 1.0) -> np.ndarray:
-        """``scale`` S_UU, a new array (the half-space's :meth:`~workbench.schemes.halfspace.HalfSpace.block`,
-        exact)."""
-        return scale * self.compliance[np.ix_(U, U)]
-
-    @staticmethod
-    def scale(U: np.ndarray, local: np.ndarray) -> float:
-        """1: S is the compliance itself (the half-space's scale to the body's stiffness, not needed)."""
-        return 1.0
+    def springs_compliance(self, U: np.ndarray, local: np.ndarray):
+        """(S, True): the compliance itself on every dof, exact (the half-space's
+        :meth:`~workbench.schemes.halfspace.HalfSpace.springs_compliance`, with no block cut and no scale: the
+        springs' factor reads the rows it needs, and grows its dofs U with the contact front)."""
+        return self.compliance, True
 
 
 def matrix_diagonal(mat) -> np.ndarray:
@@ -322,120 +319,6 @@ def line_search(slope, slope0: float, slope1: float, steps: int = 80, within: fl
         if a_hi - a_lo <= 1e-15 * max(1.0, a_hi):
             break
     return a
-
-
-class SpringsFactor:
-    """(I + J G)^-1 J on the springs' dofs R for :class:`CoupledNewton`'s preconditioner, J = J_RR sparse, G the dense
-    compliance block the LU factor of I + J0 G0 was made with, on the dofs U it was made for.
-
-    A Newton step's springs differ from the last one's on a few dofs D (the contact front: at 47k dofs on the
-    hemisphere, ~20 of 1100-1300 dofs gained in a step's first Newton iteration, 0-4 lost in its second). The factor
-    is made for dofs U beyond R (:class:`CoupledNewton` adds those nearest to contact, where the front goes next),
-    with no springs there yet: their rows of the bracket are the identity's, so only its block on R is factored.
-    Where R lies within U, the system on U with J embedded (its rows off R zero, so t = 0 there) is I + J0 G0 + E_D W,
-    W = (J - J0)_DU G0, and its solution is the factor's, corrected by Woodbury's identity: the columns M0^-1 E_D
-    (each solved once while the factor lasts) and a |D| x |D| LU, instead of a new factor, while |D| <= :attr:`share`
-    |U| (:meth:`holds`). Measured on hertz3d at its defaults (52 steps, the candidate facets; one run each; docs/
-    schemes.md, "Model A's implicit steps on candidate facets"): at 47k dofs 20 factors instead of 59 (the springs'
-    work 0.9-1.1 s against 1.8 s), at 106k 20 instead of 58 (6.1-7.0 s against 14.5 s; a step 0.51 s against 0.69
-    s), the Newton iterations the same and u equal to 1e-12 of its largest.
-    Model B's active set does the like for its points (:class:`~workbench.schemes.halfspace.ModelFactor`, which also
-    borders its factor with points gained).
-
-    >>> x = np.linspace(0.0, 1.0, 16)
-    >>> G = 1.0 / (1.0 + 10.0 * np.abs(x[:, None] - x[None, :]))  # (a compliance: falls with distance)
-    >>> F = SpringsFactor(sp.diags(np.full(16, 2.0)).tocsr(), np.arange(16), G)
-    >>> R1 = np.arange(15)  # (the last spring released, one stiffer: two dofs changed, within 16 / 8)
-    >>> J1 = sp.diags(np.r_[np.full(14, 2.0), 3.0]).tocsr()
-    >>> r = np.cos(np.arange(15.0))
-    >>> exact = np.linalg.solve(np.eye(15) + J1 @ G[:15, :15], J1 @ r)
-    >>> F.holds(J1, R1), bool(np.abs(F.solver()(r) - exact).max() < 1e-13)
-    (True, True)
-    """
-
-    #: The most changed dofs a low-rank update takes, as a share of U. Each changed dof's column M0^-1 e_i costs about
-    #: 2 |U|^2 flops once while the factor lasts, and an update |D|^2 (2 |U| + |D|) more, against a new factor's
-    #: 2/3 |R|^3.
-    #: Measured on hertz3d at 106k dofs, with the margin: 20 factors at a quarter, 26 at an eighth.
-    share = 0.25
-
-    def __init__(self, J, R: np.ndarray, G: np.ndarray, U: np.ndarray | None = None):
-        self.U, self.G = (R if U is None else U).copy(), G
-        self.J0, self._r = self._embedded(J, R)
-        self._m = np.setdiff1d(np.arange(self.U.size), self._r)
-        # M0 = I + J0 G has identity rows off R (no springs there yet): in the order (R, margin) it is [[A, B], [0, I]]
-        # with A = I + J G_RR and B = J G_R,margin, so only A is factored and the margin costs no factor work
-        J = J.tocsr()
-        A = J @ G[np.ix_(self._r, self._r)]
-        A[np.diag_indices_from(A)] += 1.0
-        self._B = J @ G[np.ix_(self._r, self._m)]
-        # (A^T's factor, in place: A is C-ordered, so A^T is LAPACK's order and no further |R|^2 array is made)
-        self.lu = la.lu_factor(A.T, overwrite_a=True, check_finite=False)
-        # M0^-1 e_i for the dofs i of U that changed since the factor, kept: they depend on the factor alone, and a
-        # dof that changed once stays changed for the next steps, as the front passes it
-        self._Z, self._column = np.empty((self.U.size, 0)), np.full(self.U.size, -1)
-        self._last = None  # (the springs holds() last took: (positions of R in U, J on U, J - J0 on U, D))
-        self.holds(J, R)
-
-    def _lu(self, b: np.ndarray) -> np.ndarray:
-        """M0^-1 b (a vector or columns on U): b off R as it is, and A x_R = b_R - B b_margin (A y = c from A^T's
-        factor)."""
-        x = b.copy()
-        x[self._r] = la.lu_solve(self.lu, b[self._r] - self._B @ b[self._m], trans=1, check_finite=False)
-        return x
-
-    def _columns(self, D: np.ndarray) -> np.ndarray:
-        """M0^-1 E_D, its columns solved once each while the factor lasts."""
-        new = D[self._column[D] < 0]
-        if new.size:
-            E = np.zeros((self.U.size, new.size))
-            E[new, np.arange(new.size)] = 1.0
-            start = self._Z.shape[1]
-            self._Z = np.hstack([self._Z, self._lu(E)])
-            self._column[new] = start + np.arange(new.size)
-        return self._Z[:, self._column[D]]
-
-    def _embedded(self, J, R):
-        """(J on U: rows and columns of U off R zero; the positions of R in U), or None where R is not within U."""
-        at = np.searchsorted(self.U, R)
-        if R.size > self.U.size or np.any(at >= self.U.size) or np.any(self.U[np.minimum(at, self.U.size - 1)] != R):
-            return None
-        J = J.tocoo()
-        return sp.csr_matrix((J.data, (at[J.row], at[J.col])), shape=(self.U.size,) * 2), at
-
-    def holds(self, J, R) -> bool:
-        """Whether the factor serves the springs (J, R): R within U and J differing from the factor's on at most
-        :attr:`share` of U's dofs."""
-        embedded = self._embedded(J, R)
-        if embedded is None:
-            return False
-        J_U, at = embedded
-        dJ = (J_U - self.J0).tocsr()
-        dJ.eliminate_zeros()
-        D = np.nonzero(np.diff(dJ.indptr))[0]
-        if D.size > self.share * self.U.size:
-            return False
-        self._last = (at, J_U, dJ, D)
-        return True
-
-    def solver(self):
-        """r (on R) -> (I + J G_RR)^-1 J r for the springs (J, R) that :meth:`holds` last took."""
-        at, J_U, dJ, D = self._last
-        correct = None
-        if D.size:
-            W, Z = dJ[D] @ self.G, self._columns(D)  # (|D| x |U|: the bracket on U is M0 + E_D W)
-            correct = (Z, W, la.lu_factor(np.eye(D.size) + W @ Z, check_finite=False))
-
-        def apply(r):
-            y = np.zeros(self.U.size)
-            y[at] = r
-            x = self._lu(J_U @ y)
-            if correct is not None:
-                Z, W, K = correct
-                x -= Z @ la.lu_solve(K, W @ x, check_finite=False)
-            return x[at]
-
-        return apply
 
 
 class CoupledNewton:
@@ -609,8 +492,8 @@ class CoupledNewton:
         made for: R and the :attr:`margin` nearest to contact at u_C, where the front goes next)."""
         if self._factor is None or not self._factor.holds(J, R):
             U = self._with_margin(R, u_C)
-            G = self.halfspace.block(U, self.halfspace.scale(U, 1.0 / self.schur.stiffness[U]))  # (S0's diagonal's)
-            self._factor = SpringsFactor(J, R, G, U)
+            G, whole = self.halfspace.springs_compliance(U, 1.0 / self.schur.stiffness[U])  # (S0's diagonal's)
+            self._factor = SpringsFactor(J, R, G, U, whole)
         return self._factor.solver()
 
     def _with_margin(self, R: np.ndarray, u_C: np.ndarray) -> np.ndarray:

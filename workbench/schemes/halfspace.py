@@ -201,6 +201,12 @@ class HalfSpace:
         """c matching c G_ii to ``local`` (S's diagonal estimate 1 / K_ii on the points U) at the median."""
         return float(np.median(local / self.own[U]))
 
+    def springs_compliance(self, U: np.ndarray, local: np.ndarray):
+        """(c G_UU, False): the compliance a springs' factor of :class:`~workbench.discrete.condensation.CoupledNewton`
+        takes on the points U, scaled to ``local`` (:meth:`scale`): a block of U alone, which the factor cannot grow
+        beyond U (:class:`~workbench.discrete.springs.SpringsFactor`)."""
+        return self.block(U, self.scale(U, local)), False
+
     def preconditioner(self, U: np.ndarray, D: np.ndarray, c: float):
         """r -> (c G_UU + diag(D))^-1 r (``c``: :meth:`scale`); None for fewer than 2 or more than :attr:`largest`
         points, or should the matrix not be positive definite. Its factor is updated, not redone, while U and D
