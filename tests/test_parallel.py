@@ -388,19 +388,20 @@ def test_the_explicit_scheme_converges_to_the_semi_discrete_solution_on_any_numb
 
     values = dict(h=0.25, order=2, contact=False, adhesion=False, traction_top="(0, 0, t)", T=0.05, snapshots=())
     sc = workbench.scene("block", **values)
-    d = discretisation.build(sc)  # (serial, on every rank: the reference's matrices)
-    F1 = d.u.vec.CreateVector()
-    d.load_vector(1.0, F1)
-    free = np.nonzero(np.array(d.fes.FreeDofs(), dtype=bool))[0]
-    exact = modal_linear(solvers.to_scipy(d.viscous.mat).toarray(), solvers.to_scipy(d.elastic.mat).toarray(),
-                         F1.FV().NumPy().copy(), free)(sc["T"])
-    errors = []
+    runs = []
     for k in (0.005, 0.0025):
         ds = workbench.run(sc, k=k, progress=False)
         assert (ds is None) == (not world().root)  # rank 0 holds the Dataset
         if ds is not None:
             assert ds.attrs["mpi_processes"] == nprocs
-            errors.append(np.abs(ds.u_dofs.values[-1] - exact).max() / np.abs(exact).max())
-    if errors:
+            runs.append(ds.u_dofs.values[-1])
+    if runs:  # (the reference on rank 0 alone, on the serial mesh: the other ranks would only compete for the cores)
+        d = discretisation.build(sc)
+        F1 = d.u.vec.CreateVector()
+        d.load_vector(1.0, F1)
+        free = np.nonzero(np.array(d.fes.FreeDofs(), dtype=bool))[0]
+        exact = modal_linear(solvers.to_scipy(d.viscous.mat).toarray(), solvers.to_scipy(d.elastic.mat).toarray(),
+                             F1.FV().NumPy().copy(), free)(sc["T"])
+        errors = [np.abs(u - exact).max() / np.abs(exact).max() for u in runs]
         order = np.log(errors[0] / errors[1]) / np.log(2.0)
         assert 0.9 <= order <= 1.1 and errors[1] < 0.08, (errors, order)
