@@ -1,6 +1,7 @@
 """Model A's implicit steps on the contact candidates against the coupled solver on the whole side, on the hemisphere.
 
-    python studies/model_a_candidates.py [--out data/hertz] [--levels 0.005 0.0035] [--scheme implicit]
+    python studies/model_a_candidates.py [--out data/hertz] [--levels 0.005 0.0035] [--scheme implicit] [--repeat 1]
+        [--variants both|candidates]
 
 ``hertz3d`` at its defaults (Kelvin-Voigt, normal compliance, backward Euler with k = 0.02 to T = 1: 52 steps, the
 load's kinks met by half steps), ``contact_solver = "auto"``, where ``auto`` takes the coupled solver (from 2500
@@ -11,7 +12,12 @@ contact dofs, candidates and whether they missed, Newton and inner iterations (t
 back-substitutions; the candidates' are dense products), the whole ``workbench.run``, the time loop, PARDISO's
 factorizations inside it, ``per_step`` (the loop less those, over the steps), the process's peak memory, and
 ``du_rel``, the largest difference of u at the contact dofs from the candidates' run, over its largest value (the two
-solve the same discrete problem). ``slope``: per_step against the dofs in log-log, per variant. Writes
+solve the same discrete problem). ``operator_dense``: the time spent inverting the candidates' condensed stiffness
+into their compliance, once per step operator (a dense Cholesky factor and its inverse, the dense counterpart of the
+operator's sparse factorization), and ``per_step_marginal``, the loop less both over the steps: what one more step of
+a size already met costs. ``slope`` and ``slope_marginal``: per_step and per_step_marginal against the dofs in
+log-log, per variant, from the medians of the ``--repeat`` runs of each level (the levels alternate, so the
+machine's drift falls on all of them). ``--variants candidates`` leaves out the coupled solver alone. Writes
 ``model_a_candidates.csv`` (about 6 minutes at the default levels).
 """
 from __future__ import annotations
@@ -37,13 +43,22 @@ from workbench.schemes.candidates import Candidates
 hc, variant, scheme, out = float(sys.argv[1]), sys.argv[2], sys.argv[3], sys.argv[4]
 if variant != "candidates":
     Candidates.most = classmethod(lambda cls, ndof, method, steps: 0)
-factoring = []
-init = pardiso.Factor.__init__
+from workbench.discrete import condensation
+factoring, dense = [], []
+init, inverse = pardiso.Factor.__init__, condensation.inverse
 
 def timed(self, *args, **kwargs):
     t = time.perf_counter()
     init(self, *args, **kwargs)
     factoring.append(time.perf_counter() - t)
+
+def timed_inverse(A):
+    t = time.perf_counter()
+    out = inverse(A)
+    dense.append(time.perf_counter() - t)
+    return out
+
+condensation.inverse = timed_inverse
 
 with threadpool_limits(1):
     discretisation.build(workbench.scene("hertz3d", h_contact=hc))  # (the mesh made and cached, modules loaded)
@@ -62,6 +77,8 @@ print(json.dumps(dict(h_contact=hc, variant=variant, scheme=scheme, ndof=int(ds.
                       newton=int(ds.newton_iterations.sum()), inner=int(ds.linear_iterations.sum()),
                       run=round(run, 2), loop=round(loop, 2), factorizations=len(factoring),
                       factor_time=round(sum(factoring), 2), per_step=round((loop - sum(factoring)) / steps, 4),
+                      operator_dense=round(sum(dense), 2),
+                      per_step_marginal=round((loop - sum(factoring) - sum(dense)) / steps, 4),
                       peak_mb=round(resource.getrusage(resource.RUSAGE_SELF).ru_maxrss / 1024.0))))
 """
 
@@ -78,24 +95,32 @@ def main():
     p.add_argument("--out", default="data/hertz")
     p.add_argument("--levels", type=float, nargs="+", default=[0.005, 0.0035])
     p.add_argument("--scheme", default="implicit", choices=["implicit", "bdf2"])
+    p.add_argument("--repeat", type=int, default=1, help="runs of each level and variant (the medians are fitted)")
+    p.add_argument("--variants", default="both", choices=["both", "candidates"])
     args = p.parse_args()
-    rows = []
+    variants = ("candidates", "coupled alone") if args.variants == "both" else ("candidates",)
+    rows, first = [], {}
     with tempfile.TemporaryDirectory() as tmp:
-        for hc in args.levels:
-            first = None
-            for variant in ("candidates", "coupled alone"):
-                row = one(hc, variant, args.scheme, f"{tmp}/u.npy")
-                u = np.load(f"{tmp}/u.npy")
-                first = u if first is None else first
-                row["du_rel"] = float(np.abs(u - first).max() / np.abs(first).max())
-                rows.append(row)
-                print(row, flush=True)
-    for variant in dict.fromkeys(r["variant"] for r in rows):
+        for repeat in range(args.repeat):
+            for hc in args.levels:
+                for variant in variants:
+                    row = one(hc, variant, args.scheme, f"{tmp}/u.npy")
+                    u = np.load(f"{tmp}/u.npy")
+                    first.setdefault(hc, u)
+                    row["repeat"] = repeat
+                    row["du_rel"] = float(np.abs(u - first[hc]).max() / np.abs(first[hc]).max())
+                    rows.append(row)
+                    print(row, flush=True)
+    for variant in variants:
         same = [r for r in rows if r["variant"] == variant]
-        if len(same) > 1:
-            fit = np.polyfit(np.log([r["ndof"] for r in same]), np.log([r["per_step"] for r in same]), 1)[0]
-            for r in same:
-                r["slope"] = round(float(fit), 3)
+        dofs = sorted({r["ndof"] for r in same})
+        if len(dofs) > 1:
+            for key, slope in (("per_step", "slope"), ("per_step_marginal", "slope_marginal")):
+                medians = [np.median([r[key] for r in same if r["ndof"] == n]) for n in dofs]
+                fit = np.polyfit(np.log(dofs), np.log(medians), 1)[0]
+                print(f"{variant}: {key} medians {medians}, slope {fit:.3f}")
+                for r in same:
+                    r[slope] = round(float(fit), 3)
     out = Path(args.out)
     out.mkdir(parents=True, exist_ok=True)
     name = "model_a_candidates.csv" if args.scheme == "implicit" else f"model_a_candidates_{args.scheme}.csv"

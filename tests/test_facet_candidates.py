@@ -17,6 +17,7 @@ from workbench.input.numerics import Numerics
 from workbench.schemes import facet_candidates
 from workbench.schemes.candidates import Candidates
 from workbench.schemes.facet_candidates import FacetCandidates
+from workbench.schemes.step_operators import StepOperators
 
 pytestmark = pytest.mark.skipif(not pardiso.available(), reason="the candidates are kept by PARDISO's factor")
 
@@ -48,8 +49,8 @@ def test_the_candidates_hold_the_zone_and_equal_the_condensed_solver(coupled_fro
     """The hemisphere at h_contact = 0.02 (332 contact vertices, 86 in contact at the end), 52 backward Euler steps:
     150 candidates (fewer than the 331 the rule gives, so that the other points are checked at every step) hold the
     zone. Equal to the condensed solver to 1e-9 (measured 3e-12), with at most one inner iteration per Newton
-    iteration (the springs' systems are preconditioned by their exact inverse), where the coupled solver on the
-    whole side takes several."""
+    iteration on the run's own steps (the springs' systems are preconditioned by their exact inverse), where the
+    coupled solver on the whole side takes several."""
     kw = dict(h_contact=0.02, progress=False)
     monkeypatch.setattr(Candidates, "most", classmethod(lambda cls, ndof, method, steps: 150))
     auto = workbench.run("hertz3d", **kw)
@@ -57,7 +58,8 @@ def test_the_candidates_hold_the_zone_and_equal_the_condensed_solver(coupled_fro
     assert auto.attrs["contact_candidates"] == 150 and auto.attrs["contact_candidates_missed"] == 0
     assert int((auto.contact_pressure.values[-1] > 0).sum()) == 86
     _agree(auto, workbench.run("hertz3d", contact_solver="condensed", **kw), 1e-9)
-    assert int(auto.linear_iterations.sum()) <= int(auto.newton_iterations.sum())
+    own = np.isclose(np.diff(auto.time.values), 0.02)  # (the run's own steps: the landings' are the coupled solver's)
+    assert int(auto.linear_iterations[1:][own].sum()) <= int(auto.newton_iterations[1:][own].sum())
     coupled = workbench.run("hertz3d", contact_solver="coupled", **kw)
     assert coupled.attrs["contact_candidates"] == 0  # (asked by name: the coupled solver on the whole side)
     assert int(coupled.linear_iterations.sum()) > 2 * int(auto.linear_iterations.sum())
@@ -90,18 +92,72 @@ def test_a_zone_that_outgrows_what_is_affordable_goes_to_the_coupled_solver(coup
 
 
 @pytest.mark.parametrize("kw", [dict(h_contact=0.02, scheme="bdf2", k=0.05, T=0.6, load="4 * t"),
-                                dict(order=2, h_contact=0.04, c_nu=1e7, tau=1e-3, k=0.1, T=0.3)],
+                                dict(order=2, h_contact=0.04, c_nu=1e7, tau=1e-3, k=0.1, T=0.3, snapshots=())],
                          ids=["BDF2, another load", "P2, stiff compliance"])
 def test_the_candidates_with_bdf2_and_on_p2(coupled_from_100, monkeypatch, kw):
     """Unlike the first test: BDF2 (its first step by backward Euler, then its own operator) under a load rising
     without a kink, with 120 candidates; and P2 elements with a stiff compliance (the candidates' dofs include the
-    edges'; the rule's count covers every contact dof there, so none is checked). Against the condensed solver to
-    1e-8."""
+    edges'; the rule's count covers every contact dof there, so none is checked; no snapshot off the grid, so that
+    every step is the candidates'). Against the condensed solver to 1e-8."""
     if "order" not in kw:
         monkeypatch.setattr(Candidates, "most", classmethod(lambda cls, ndof, method, steps: 120))
     kw = kw | dict(progress=False)
     auto = workbench.run("hertz3d", **kw)
     assert auto.attrs["contact_candidates"] > 0 and auto.attrs["contact_candidates_missed"] == 0
+    _agree(auto, workbench.run("hertz3d", contact_solver="condensed", **kw), 1e-8)
+
+
+@pytest.mark.parametrize("scheme", ["implicit", "bdf2"])
+def test_the_candidates_are_kept_for_the_runs_own_step_alone(coupled_from_100, monkeypatch, scheme):
+    """A fixed-step run meets other step operators besides its own (k after k): here the landing on a snapshot off
+    the grid (two steps of 0.015 to t = 0.13), and with BDF2 its first step (backward Euler) and the step after each
+    change of size. Each of those serves a step or two, so the factorization keeps the candidates for the run's own
+    operator alone (keeping them costs about twice a plain factorization, and their compliance's inverse more), and
+    the other steps are the coupled solver's on the whole side. One operator asked for its candidates, the others'
+    steps with more inner iterations than Newton iterations (back-substitutions), and the run equal to the condensed
+    solver to 1e-8."""
+    asked = []
+    operator = FacetCandidates.operator
+
+    def counted(self, solver, again=False):
+        asked.append(again)
+        return operator(self, solver, again)
+
+    monkeypatch.setattr(FacetCandidates, "operator", counted)
+    monkeypatch.setattr(Candidates, "most", classmethod(lambda cls, ndof, method, steps: 150))
+    kw = dict(h_contact=0.02, scheme=scheme, k=0.02, T=0.3, snapshots=(0.13,), progress=False)
+    auto = workbench.run("hertz3d", **kw)
+    assert auto.attrs["contact_candidates"] == 150 and auto.attrs["contact_candidates_missed"] == 0
+    assert asked == [False]
+    k = np.diff(auto.time.values)
+    own = np.isclose(k, 0.02) & (np.isclose(np.r_[0.0, k[:-1]], 0.02) if scheme == "bdf2" else True)
+    assert 0 < (~own).sum() < own.sum()
+    newton, inner = auto.newton_iterations.values[1:], auto.linear_iterations.values[1:]
+    assert (inner[own] <= newton[own]).all() and (inner[~own] > newton[~own]).all()
+    _agree(auto, workbench.run("hertz3d", contact_solver="condensed", **kw), 1e-8)
+
+
+def test_an_operator_that_keeps_serving_gets_the_candidates_too(coupled_from_100, monkeypatch):
+    """Six snapshots halfway between the points of a grid of 0.02: each is landed on and left by a step of 0.01,
+    whose operator then serves 12 steps in all. The first nine are the coupled solver's; at the tenth
+    (``RENT_STEPS``) its factorization is made again keeping the candidates (the second request), and that step and
+    the last two are theirs. Equal to the condensed solver to 1e-8."""
+    asked = []
+    operator = FacetCandidates.operator
+
+    def counted(self, solver, again=False):
+        asked.append(again)
+        return operator(self, solver, again)
+
+    monkeypatch.setattr(FacetCandidates, "operator", counted)
+    monkeypatch.setattr(Candidates, "most", classmethod(lambda cls, ndof, method, steps: 150))
+    kw = dict(h_contact=0.02, k=0.02, T=0.4, snapshots=tuple(0.05 + 0.06 * j for j in range(6)), progress=False)
+    auto = workbench.run("hertz3d", **kw)
+    assert StepOperators.RENT_STEPS == 10 and asked == [False, True]
+    landing = np.nonzero(np.isclose(np.diff(auto.time.values), 0.01))[0]
+    assert landing.size == 12
+    newton, inner = auto.newton_iterations.values[1:], auto.linear_iterations.values[1:]
+    assert (inner[landing[:9]] > newton[landing[:9]]).all() and (inner[landing[9:]] <= newton[landing[9:]]).all()
     _agree(auto, workbench.run("hertz3d", contact_solver="condensed", **kw), 1e-8)
 
 

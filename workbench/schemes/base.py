@@ -338,13 +338,22 @@ EVENT_FRACTION = 0.25
 KINK_NOISE = 1e-12
 
 
-def make_room(cache, size: int, key=None) -> None:
+def make_room(cache, size: int, key=None, keep=None) -> None:
     """Drops the least recently used entries of the OrderedDict ``cache`` (not ``key``'s) until a new entry, or
-    ``key``'s, fits ``size``. The schemes call it *before* they factor an operator they do not hold, and drop their
-    own references to the last one: factors of a gigabyte each, two at once, doubled the peak (BDF2 on the P2 block at
-    271k dofs: 5.67 GB, 3.36 GB now)."""
+    ``key``'s, fits ``size``; ``keep``'s last, where it is the only one left to drop. The schemes call it *before*
+    they factor an operator they do not hold, and drop their own references to the last one: factors of a gigabyte
+    each, two at once, doubled the peak (BDF2 on the P2 block at 271k dofs: 5.67 GB, 3.36 GB now).
+
+    >>> from collections import OrderedDict
+    >>> cache = OrderedDict.fromkeys("abc")
+    >>> make_room(cache, 2, "d", keep="a"); list(cache)
+    ['a']
+    >>> make_room(cache, 1, "d", keep="a"); list(cache)
+    []
+    """
     while len(cache) - (key in cache) >= size:
-        del cache[next(k for k in cache if k != key)]
+        spare = [k for k in cache if k != key]
+        del cache[next((k for k in spare if k != keep), spare[0])]
 
 
 def _settled(before: np.ndarray, after: np.ndarray, world) -> tuple:

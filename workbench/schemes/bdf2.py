@@ -73,6 +73,10 @@ class BDF2(ImplicitEuler):
         b = A * kp - 2.0
         return (-b + math.sqrt(b * b + 4.0 * A * kp)) / (2.0 * A)
 
+    def _constant_a0(self, k: float) -> float:
+        """a0 of a step of size k after one of the same size (w = 1): 3 / (2k)."""
+        return 1.5 / k
+
     def coefficients(self, k: float):
         steps = self._steps(k)
         if steps is None:

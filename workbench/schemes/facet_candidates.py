@@ -30,6 +30,14 @@ one: measured on the hemisphere at 47k dofs with BDF2 at rtol = 1e-3 (389 solves
 the candidates against 228 s without (the factorizations 154 against 78 s, the rest 76 against 149 s): a tie, so
 they stay out (356 s against 277 s on the finer a0 grid of before, 113 factorizations).
 
+For the same reason a run of fixed steps keeps them in the factorization of its own operator, the a0 of a step k
+after steps of k (:mod:`workbench.schemes.step_operators`). Its other operators (a landing on a snapshot off the
+grid, BDF2's first step and the step after each change of size) serve a step or two each, and those steps are the
+coupled solver's on a plain factor, until one of them has served ``StepOperators.RENT_STEPS`` steps; its
+factorization is then made again keeping the candidates. On ``hertz3d``
+with BDF2 (five operators) that took the run at 47k dofs from 43.0 to 33.1 s (docs/schemes.md, "The candidates kept
+for the run's own operator").
+
 Measured with fixed steps on the hemisphere (``hertz3d`` at its defaults, 52 steps of backward Euler;
 ``python studies/model_a_candidates.py``, docs/schemes.md, "Model A's implicit steps on candidate facets"): at 47k
 dofs 23.2 s against 49.0 s for the coupled solver on the whole side, at 106k 74.6 s against 140.0 s, at 193k (where

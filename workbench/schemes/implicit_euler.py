@@ -35,18 +35,17 @@ two back-substitutions. Newton iterations are recorded per step
 """
 from __future__ import annotations
 
-from collections import OrderedDict
-
 import numpy as np
 
 from ..discrete import solvers
 from ..discrete.condensation import CondensedNewton, CondensedSystem, ContactOperator, CoupledNewton, SchurOperator
 from ..physics.ops import NP
-from .base import ErrorControlled, make_room
+from .base import ErrorControlled
 from .candidates import Candidates
 from .facet_candidates import FacetCandidates
 from .halfspace import HalfSpace
 from .model_a import KelvinVoigtScheme, kink_event
+from .step_operators import StepOperator, StepOperators
 
 
 class ImplicitEuler(ErrorControlled, KelvinVoigtScheme):
@@ -93,8 +92,10 @@ class ImplicitEuler(ErrorControlled, KelvinVoigtScheme):
         self.coupled = self.contact and d.numerics.coupled_contact(size, self.method, solvers.forms_schur(self.method))
         self.bonding = d.model.bonding
         self.candidates = FacetCandidates.of(d, self.op, self.method, self.coupled)
-        self._factors = OrderedDict()
-        self.newton = self.solver = self.kept = None  # (the step's, from _prepare)
+        n = d.numerics
+        own = None if n.adaptive else StepOperators.key(self._constant_a0(n.k))
+        self.operators = StepOperators(self.cache_size, own, self.candidates, self._build)
+        self.M = self.newton = self.solver = self.split = self.kept = None  # (the step's, from _prepare)
         self.iterations = self.passes = self.inner = 0
         self.resolved = True
 
@@ -120,35 +121,26 @@ class ImplicitEuler(ErrorControlled, KelvinVoigtScheme):
         """v_n = a0 (u_n - u_{n-1}) + w_n."""
         return a0 * du if w is None else a0 * du + w
 
-    @staticmethod
-    def _key(a0: float) -> float:
-        return float(f"{a0:.11g}")  # (a0 snapped to a grid by BDF2 comes back equal only to round-off)
-
     def _prepare(self, a0: float, k: float) -> None:
-        """a0 K_A + K_G from the assembled matrices (same sparsity), factored and condensed; cached by a0.
-
-        An entry serves every a0 of its key, so it is the operator of the a0 that first met the key (fixed steps of
-        the uniform grid differ in the last bits): the cache's a0s are restart state (:meth:`_cache_state`). A
-        restored entry is that a0 alone until it is used, then built from it.
-        """
-        d = self.d
-        key = self._key(a0)
-        entry = self._factors.get(key)
-        if not isinstance(entry, tuple):
-            make_room(self._factors, self.cache_size, key)
+        """The operator a0 K_A + K_G of the step (:class:`~workbench.schemes.step_operators.StepOperators`)."""
+        if not self.operators.holds(a0):
             self.M = self.solver = self.newton = self.split = self.kept = None  # (freed with theirs, if dropped)
-            built_from = a0 if entry is None else entry
-            M = d.viscous.mat.CreateMatrix()
-            M.AsVector().data = built_from * d.viscous.mat.AsVector() + d.elastic.mat.AsVector()
-            solver = d.step_factor(M)
-            diagonal = self.exchange.diagonal(M) if self.coupled else None  # (on every process: it gathers)
-            newton = self.exchange.run(lambda: self._newton(solver, diagonal), solver) if self.contact else None
-            split = solver.split(self.op.C) if self.op is not None and not self.coupled else None
-            kept = self.candidates.operator(solver) if self.candidates is not None else None
-            self._factors[key] = (M, solver, newton, built_from, split, kept)
-        self._factors.move_to_end(key)
-        self.M, self.solver, self.newton, _, self.split, self.kept = self._factors[key]
-        self.resolved = self.bonding is None or self.bonding.resolved(k, d.model.beta0)
+        op = self.operators.get(a0)
+        self.M, self.solver, self.newton, self.split, self.kept = op.M, op.solver, op.newton, op.split, op.kept
+        self.resolved = self.bonding is None or self.bonding.resolved(k, self.d.model.beta0)
+
+    def _build(self, a0: float, keep: bool) -> StepOperator:
+        """a0 K_A + K_G from the assembled matrices (same sparsity), factored, with its contact solver; the
+        factorization keeps the contact candidates where ``keep``."""
+        d = self.d
+        M = d.viscous.mat.CreateMatrix()
+        M.AsVector().data = a0 * d.viscous.mat.AsVector() + d.elastic.mat.AsVector()
+        solver = d.step_factor(M)
+        diagonal = self.exchange.diagonal(M) if self.coupled else None  # (on every process: it gathers)
+        newton = self.exchange.run(lambda: self._newton(solver, diagonal), solver) if self.contact else None
+        split = solver.split(self.op.C) if self.op is not None and not self.coupled else None
+        kept = self.candidates.operator(solver) if keep else None
+        return StepOperator(M, solver, newton, split, kept)
 
     def _newton(self, solver, diagonal=None):
         """The contact solver of the operator ``solver`` solves (where the contact problem is solved); ``diagonal``:
@@ -164,11 +156,14 @@ class ImplicitEuler(ErrorControlled, KelvinVoigtScheme):
         return CondensedNewton(CondensedSystem(proxy, view.ndof, self.op.C), self.op)
 
     def _cache_state(self) -> list:
-        """The a0 each cached operator was built from, least recently used first."""
-        return [entry[3] if isinstance(entry, tuple) else entry for entry in self._factors.values()]
+        return self.operators.state()
 
     def _restore_cache(self, cache: list) -> None:
-        self._factors = OrderedDict((self._key(a0), float(a0)) for a0 in cache)
+        self.operators.restore(cache)
+
+    def _constant_a0(self, k: float) -> float:
+        """a0 of a step of size k after steps of the same size: 1/k."""
+        return 1.0 / k
 
     # -- one step ---------------------------------------------------------------------------------------------
     def step(self, t_prev: float, t_next: float) -> None:

@@ -1,0 +1,106 @@
+"""The step operators a0 K_A + K_G of Model A's implicit schemes, factored once per a0 and cached
+(:class:`~workbench.schemes.implicit_euler.ImplicitEuler` and BDF2).
+
+A run of fixed steps k mostly meets one operator, its own: a0 of a step k after steps of k (1/k for backward Euler,
+3/(2k) for BDF2). It meets others too, each for a step or two: a landing on a snapshot off the grid, BDF2's first
+step (backward Euler) and the step after each change of size. Two choices follow from that.
+
+* Where the cache holds fewer operators than the run meets (large factors: ``solvers.factors_kept``), the run's own
+  is dropped last, so a landing does not cost it a factorization again. BDF2 on the hemisphere at 106k dofs holds
+  two and meets five; its own was factored three times before.
+* The contact candidates (:mod:`~workbench.schemes.facet_candidates`) are kept in the own operator's factorization
+  at once. Keeping them costs a factorization about twice a plain one, and their compliance's inverse. Another
+  operator's steps are the coupled solver's on a plain factor until it has served :attr:`StepOperators.RENT_STEPS`;
+  its factorization is then made again keeping them. The rule is the ski rental's: an operator that serves a landing
+  or two stays plain, and one that keeps serving costs at most about twice the better choice.
+"""
+from __future__ import annotations
+
+from collections import Counter, OrderedDict
+from dataclasses import dataclass
+
+from .base import make_room
+
+
+@dataclass
+class StepOperator:
+    """One factored operator: the matrix ``M``, its ``solver``, the contact solver ``newton`` on it, the solve in
+    parts around the contact dofs (``split``, the condensed solver's), and the candidates' operator (``kept``, None
+    where the factorization does not keep them)."""
+
+    M: object
+    solver: object
+    newton: object = None
+    split: object = None
+    kept: list | None = None
+    #: The a0 it was built from (:meth:`StepOperators.state`).
+    a0: float = 0.0
+
+
+class StepOperators:
+    """The factored operators of one run, one per key of a0 (:meth:`key`), at most ``size`` of them: the least
+    recently used dropped first, the run's own (``own``, its key; None under error control, where no step size
+    stands out) last. ``build(a0, keep)`` makes a :class:`StepOperator`, keeping the contact ``candidates`` where
+    ``keep`` (None: the run has none).
+
+    The a0 each entry was built from is restart state (:meth:`state`). An entry serves every a0 of its key, so it is
+    the operator of the a0 that first met the key (fixed steps of the uniform grid differ in the last bits); a
+    restored one is that a0 alone until it is used, then built from it.
+
+    >>> built = []
+    >>> build = lambda a0, keep: built.append(a0) or StepOperator(a0, None)  # (M: a0 itself, to read back)
+    >>> ops = StepOperators(2, StepOperators.key(50.0), None, build)
+    >>> [ops.get(a0).M for a0 in (50.0, 100.0, 200.0, 50.0)], ops.state(), built
+    ([50.0, 100.0, 200.0, 50.0], [200.0, 50.0], [50.0, 100.0, 200.0])
+    """
+
+    #: The step of an operator other than the run's own at which its factorization is made again keeping the
+    #: candidates; its steps before are the coupled solver's. A step on the candidates saves a coupled step's
+    #: back-substitutions; keeping them costs a factorization about twice a plain one and the compliance's inverse.
+    #: On ``hertz3d`` the two balance after about 11 steps at 47k dofs and 12 at 106k (docs/schemes.md).
+    RENT_STEPS = 10
+
+    def __init__(self, size: int, own, candidates, build):
+        self.size, self.own, self.candidates, self._build = size, own, candidates, build
+        self._entries = OrderedDict()
+        self._rented = Counter()  # (steps of each operator on the coupled solver while the candidates are not kept)
+
+    @staticmethod
+    def key(a0: float) -> float:
+        return float(f"{a0:.11g}")  # (a0 snapped to a grid by BDF2 comes back equal only to round-off)
+
+    def holds(self, a0: float) -> bool:
+        """Whether the operator of ``a0`` is factored (else :meth:`get` factors it, and may drop another)."""
+        return isinstance(self._entries.get(self.key(a0)), StepOperator)
+
+    def get(self, a0: float) -> StepOperator:
+        """The operator of ``a0``, factored where it is not held; counted as one more step."""
+        key = self.key(a0)
+        entry = self._entries.get(key)
+        if not isinstance(entry, StepOperator):
+            make_room(self._entries, self.size, key, keep=self.own)
+            built_from = a0 if entry is None else entry
+            self._entries[key] = self._build(built_from, self._keeps(key))
+            self._entries[key].a0 = built_from
+        self._entries.move_to_end(key)
+        operator = self._entries[key]
+        if operator.kept is None and self.candidates is not None and not self.candidates.missed:
+            self._rent(key, operator)
+        return operator
+
+    def _keeps(self, key: float) -> bool:
+        return self.candidates is not None and (key == self.own or self._rented[key] >= self.RENT_STEPS)
+
+    def _rent(self, key: float, operator: StepOperator) -> None:
+        """One more step of ``operator`` on the coupled solver; at :attr:`RENT_STEPS`, its factorization is made
+        again keeping the candidates, for this step and the rest."""
+        self._rented[key] += 1
+        if self._rented[key] == self.RENT_STEPS:  # (once: a factor that cannot keep them stays as it is)
+            operator.kept = self.candidates.operator(operator.solver, again=True)
+
+    def state(self) -> list:
+        """The a0 each held operator was built from, least recently used first."""
+        return [entry.a0 if isinstance(entry, StepOperator) else entry for entry in self._entries.values()]
+
+    def restore(self, a0s: list) -> None:
+        self._entries = OrderedDict((self.key(a0), float(a0)) for a0 in a0s)
