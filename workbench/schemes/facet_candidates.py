@@ -34,9 +34,9 @@ For the same reason a run of fixed steps keeps them in the factorization of its 
 after steps of k (:mod:`workbench.schemes.step_operators`). Its other operators (a landing on a snapshot off the
 grid, BDF2's first step and the step after each change of size) serve a step or two each, and those steps are the
 coupled solver's on a plain factor, until one of them has served ``StepOperators.RENT_STEPS`` steps; its
-factorization is then made again keeping the candidates. On ``hertz3d``
-with BDF2 (five operators) that took the run at 47k dofs from 43.0 to 33.1 s (docs/schemes.md, "The candidates kept
-for the run's own operator").
+factorization is then made again keeping the candidates. On ``hertz3d`` with BDF2 (five operators, 52 steps) that
+took the run from 46.6 to 37.1 s at 47k dofs and, with the own operator dropped last from a cache of two, from 264.7
+to 137.3 s at 106k (docs/schemes.md, "The candidates kept for the run's own operator").
 
 Measured with fixed steps on the hemisphere (``hertz3d`` at its defaults, 52 steps of backward Euler;
 ``python studies/model_a_candidates.py``, docs/schemes.md, "Model A's implicit steps on candidate facets"): at 47k
