@@ -107,24 +107,30 @@ def test_the_candidates_with_bdf2_and_on_p2(coupled_from_100, monkeypatch, kw):
     _agree(auto, workbench.run("hertz3d", contact_solver="condensed", **kw), 1e-8)
 
 
-@pytest.mark.parametrize("scheme", ["implicit", "bdf2"])
-def test_the_candidates_are_kept_for_the_runs_own_step_alone(coupled_from_100, monkeypatch, scheme):
-    """A fixed-step run meets other step operators besides its own (k after k): here the landing on a snapshot off
-    the grid (two steps of 0.015 to t = 0.13), and with BDF2 its first step (backward Euler) and the step after each
-    change of size. Each of those serves a step or two, so the factorization keeps the candidates for the run's own
-    operator alone (keeping them costs about twice a plain factorization, and their compliance's inverse more), and
-    the other steps are the coupled solver's on the whole side. One operator asked for its candidates, the others'
-    steps with more inner iterations than Newton iterations (back-substitutions), and the run equal to the condensed
-    solver to 1e-8."""
-    asked = []
+@pytest.fixture
+def asked(monkeypatch):
+    """150 candidates, and the requests for their operator, in order (``again``: the factorization made anew)."""
+    requests = []
     operator = FacetCandidates.operator
 
     def counted(self, solver, again=False):
-        asked.append(again)
+        requests.append(again)
         return operator(self, solver, again)
 
     monkeypatch.setattr(FacetCandidates, "operator", counted)
     monkeypatch.setattr(Candidates, "most", classmethod(lambda cls, ndof, method, steps: 150))
+    return requests
+
+
+@pytest.mark.parametrize("scheme", ["implicit", "bdf2"])
+def test_the_candidates_are_kept_for_the_runs_own_step_alone(coupled_from_100, asked, scheme):
+    """A fixed-step run meets other step operators besides its own (k after k): here the landing on a snapshot off
+    the grid (0.12 to 0.13 to 0.14, two steps of 0.01), and with BDF2 its first step (backward Euler) and the step
+    after each change of size. Each of those serves a step or two, so the factorization keeps the candidates for the
+    run's own operator alone (keeping them costs about twice a plain factorization, and their compliance's inverse
+    more), and the other steps are the coupled solver's on the whole side. One operator asked for its candidates,
+    the others' steps with more inner iterations than Newton iterations (back-substitutions), and the run equal to
+    the condensed solver to 1e-8."""
     kw = dict(h_contact=0.02, scheme=scheme, k=0.02, T=0.3, snapshots=(0.13,), progress=False)
     auto = workbench.run("hertz3d", **kw)
     assert auto.attrs["contact_candidates"] == 150 and auto.attrs["contact_candidates_missed"] == 0
@@ -137,20 +143,11 @@ def test_the_candidates_are_kept_for_the_runs_own_step_alone(coupled_from_100, m
     _agree(auto, workbench.run("hertz3d", contact_solver="condensed", **kw), 1e-8)
 
 
-def test_an_operator_that_keeps_serving_gets_the_candidates_too(coupled_from_100, monkeypatch):
+def test_an_operator_that_keeps_serving_gets_the_candidates_too(coupled_from_100, asked):
     """Six snapshots halfway between the points of a grid of 0.02: each is landed on and left by a step of 0.01,
     whose operator then serves 12 steps in all. The first nine are the coupled solver's; at the tenth
     (``RENT_STEPS``) its factorization is made again keeping the candidates (the second request), and that step and
     the last two are theirs. Equal to the condensed solver to 1e-8."""
-    asked = []
-    operator = FacetCandidates.operator
-
-    def counted(self, solver, again=False):
-        asked.append(again)
-        return operator(self, solver, again)
-
-    monkeypatch.setattr(FacetCandidates, "operator", counted)
-    monkeypatch.setattr(Candidates, "most", classmethod(lambda cls, ndof, method, steps: 150))
     kw = dict(h_contact=0.02, k=0.02, T=0.4, snapshots=tuple(0.05 + 0.06 * j for j in range(6)), progress=False)
     auto = workbench.run("hertz3d", **kw)
     assert StepOperators.RENT_STEPS == 10 and asked == [False, True]
