@@ -74,7 +74,8 @@ class StepOperators:
         return isinstance(self._entries.get(self.key(a0)), StepOperator)
 
     def get(self, a0: float) -> StepOperator:
-        """The operator of ``a0``, factored where it is not held; counted as one more step."""
+        """The operator of ``a0`` for one more step, factored where it is not held (a step of an operator that does
+        not keep the candidates counts toward :attr:`RENT_STEPS`)."""
         key = self.key(a0)
         entry = self._entries.get(key)
         if not isinstance(entry, StepOperator):
