@@ -11,6 +11,8 @@ from workbench.physics.unilateral import COMPLIANT, RIGID, SEPARATED, STUCK
 from workbench.schemes import candidates
 from workbench.schemes.candidates import Candidates
 from workbench.schemes.contact_nodes import ContactNodes
+from workbench.schemes.memory_vi import MemoryVI
+from workbench.schemes.step_operators import StepOperators
 
 pytestmark = pytest.mark.skipif(not pardiso.available(), reason="the candidates are kept by PARDISO's factor")
 
@@ -81,6 +83,30 @@ def test_the_candidates_with_a_compliant_layer_memory_and_a_load_at_t0():
     assert auto.attrs["contact_candidates"] > 0 and auto.attrs["contact_candidates_missed"] == 0
     assert int(auto.n_compliant.values[-1]) > 0 and int(auto.n_rigid.values[-1]) > 0
     _agree(auto, workbench.run("memory_hertz3d", contact_solver="condensed", **kw))
+
+
+def test_the_trapezoid_rules_landing_steps_share_one_plain_operator(monkeypatch):
+    """The trapezoid rule puts part of the memory into the step's operator, so a run meets one per step size: t = 0's
+    (K_A), its own (k = 0.1) and the landings' on the snapshots off the grid (0.2 to 0.25 to 0.3: two steps of 0.05,
+    which differ in their last bits and share one operator). The factorization keeps the candidates for the run's
+    own operator alone; the others' steps are the coupled solver's on a plain factor until one has served
+    ``RENT_STEPS`` steps (made 3 here: the landings' third step of four), when its factorization is made again
+    keeping them. Against the condensed solver, to the coupled solver's tolerance (1e-7 of the pressures). Before,
+    the run factored four operators, each keeping the candidates."""
+    built, requests = [], []
+    build, operator = MemoryVI._build, Candidates.operator
+    monkeypatch.setattr(MemoryVI, "_build", lambda self, w, keep: built.append((w, keep)) or build(self, w, keep))
+    monkeypatch.setattr(Candidates, "operator", lambda self, solver, again=False: requests.append(again) or
+                        operator(self, solver, again))
+    monkeypatch.setattr(StepOperators, "RENT_STEPS", 3)
+    kw = dict(h_contact=0.01, k=0.1, memory_rule="trapezoid", prony=[[-300.0, 0.3, 0.5]], progress=False)
+    auto = workbench.run("memory_hertz3d", **kw)
+    assert auto.attrs["contact_candidates"] > 0 and auto.attrs["contact_candidates_missed"] == 0
+    assert [keep for _, keep in built] == [False, True, False] and built[0][0] == (0.0,)
+    assert requests == [False, True]
+    # (the coupled solver's conjugate gradients: in the landings' first two steps alone)
+    assert np.allclose(auto.time.values[auto.linear_iterations.values > 0], [0.25, 0.3], rtol=0, atol=1e-12)
+    _agree(auto, workbench.run("memory_hertz3d", contact_solver="condensed", **kw), tol=1e-7)
 
 
 def test_a_run_of_many_steps_affords_more_candidates():

@@ -120,13 +120,14 @@ class Candidates:
             return {"contact_candidates": 0, "contact_candidates_missed": 0}
         return {"contact_candidates": candidates.kept, "contact_candidates_missed": int(candidates.missed)}
 
-    def operator(self, solver):
-        """The candidates' operator from ``solver``'s factorization, which keeps them last (asked before any solve):
-        [the points P, their condensed stiffness, the solve in parts around them, the active set's scale rho, their
-        compliance, the solver]; or None where it cannot. A list: it grows in place (:meth:`equilibrium`)."""
+    def operator(self, solver, again: bool = False):
+        """The candidates' operator from ``solver``'s factorization, which keeps them last (asked before any solve,
+        or ``again``: the factorization made anew): [the points P, their condensed stiffness, the solve in parts
+        around them, the active set's scale rho, their compliance, the solver]; or None where it cannot. A list: it
+        grows in place (:meth:`equilibrium`)."""
         if self.missed:
             return None
-        return self._keep(solver, self.P)
+        return self._keep(solver, self.P, again)
 
     def _keep(self, solver, P, again: bool = False):
         found = solver.kept(self.nodes.C[P], again)

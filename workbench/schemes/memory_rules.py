@@ -58,6 +58,18 @@ class MemoryRule:
         a step of length k is K_A + sum_i w_i s_i K_i."""
         raise NotImplementedError
 
+    def operator(self, weights):
+        """K_A + sum_i w_i s_i K_i for the ``weights`` w of :meth:`implicit_weights` (K_A itself where all are 0)."""
+        K_A = self.d.elastic.mat
+        if not any(weights):
+            return K_A
+        M = K_A.CreateMatrix()
+        vec = M.AsVector()
+        vec.data = K_A.AsVector()
+        for wi, si, (K, _, _) in zip(weights, self.scales, self.d.memory):
+            vec.data += (wi * si) * K.mat.AsVector()
+        return M
+
     def advance(self, t_prev: float, t_next: float, u_prev: np.ndarray, out: np.ndarray, weights: list) -> None:
         """out = sum_i K_Ci H~_i: the histories advanced to t_next without their u_n part (``weights``: this step's
         :meth:`implicit_weights`, kept for :meth:`finish`)."""

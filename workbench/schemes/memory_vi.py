@@ -67,7 +67,7 @@ left out) turns the force dM into a displacement.
 """
 from __future__ import annotations
 
-from collections import OrderedDict
+from dataclasses import dataclass
 
 import numpy as np
 
@@ -75,11 +75,22 @@ from ..discrete import solvers
 from ..discrete.condensation import CondensedSystem, SchurOperator
 from ..input.numerics import COUPLED_FROM_SCHUR
 from ..physics import unilateral
-from .base import ErrorControlled, Observer, Scheme, first_event, make_room
+from .base import ErrorControlled, Observer, Scheme, first_event
 from .candidates import Candidates
 from .contact_nodes import ContactNodes
 from .coupled_contact import CoupledActiveSet, condensed_up_to
 from .memory_rules import rule_for
+from .step_operators import StepOperator, StepOperators
+
+
+@dataclass
+class MemoryOperator(StepOperator):
+    """Model B's step operator: with the condensed solver's dense contact stiffness ``S_inv`` (built on demand where
+    the coupled solver falls back to it), the active set's scale ``rho`` and the coupled solver's ``schur``."""
+
+    S_inv: object = None
+    rho: object = None
+    schur: object = None
 
 
 class MemoryVI(ErrorControlled, Scheme):
@@ -120,7 +131,10 @@ class MemoryVI(ErrorControlled, Scheme):
         self.candidates = Candidates.of(self.nodes, self.method) if self.coupled is not None and x.solves else None
         self.memory = rule_for(d, self.trapezoid)  # (None without memory)
         self._balance = None  # f - memory of the last equilibrium (only for the reaction of pinned contact nodes)
-        self._operators = OrderedDict()
+        # (the run's own operator, its step's: none under error control with the trapezoid, which changes each step)
+        own = None if d.numerics.adaptive and any(self._weights_of(1.0)) else self._weights_of(d.numerics.k)
+        self.operators = StepOperators(self.cache_size, None if own is None else StepOperators.key(own),
+                                       self.candidates, self._build)
         self._use(0.0)
         self.z = np.zeros(d.ndof)
         self.rhs = d.u.vec.CreateVector()
@@ -141,41 +155,40 @@ class MemoryVI(ErrorControlled, Scheme):
         return used if fit is None else used | {"kernel_terms": fit["terms"], "kernel_fit_error": fit["error"]}
 
     # -- the operator of a step -------------------------------------------------------------------------------
+    def _weights_of(self, k: float) -> tuple:
+        """The weights w_i of u_n in the memory terms of a step of length k (all 0 but for the trapezoid rule)."""
+        return tuple(self.memory.implicit_weights(k)) if self.memory is not None else ()
+
     def _use(self, k: float) -> None:
-        """Factor (and condense) K_A + sum_i w_i K_Ci for this step (cached by the weights)."""
-        d = self.d
-        weights = self.memory.implicit_weights(k) if self.memory is not None else []
-        key = tuple(weights)
-        if key not in self._operators:
-            make_room(self._operators, self.cache_size)
+        """K_A + sum_i w_i K_Ci for a step of length k, factored once per weights (:class:`StepOperators`)."""
+        weights = self._weights_of(k)
+        if not self.operators.holds(weights):
             self.M = self.solver = self.S_inv = self.schur = self.split = self.kept = None  # (freed with theirs)
-            M = d.elastic.mat
-            if any(weights):
-                M = d.elastic.mat.CreateMatrix()
-                vec = M.AsVector()
-                vec.data = d.elastic.mat.AsVector()
-                for wi, si, (K, _, _) in zip(weights, self.memory.scales, d.memory):
-                    vec.data += (wi * si) * K.mat.AsVector()
-            solver = d.step_factor(M)
-            x, nodes, schur, S_inv, rho = self.exchange, self.nodes, None, None, None
-            if self.coupled is not None:
-                diagonal = x.diagonal(M)
-                schur = SchurOperator(x.proxy(solver), x.view.ndof, nodes.C, nodes.sign, diagonal, nodes.B, True) \
-                    if x.solves else None
-            else:
-                S_inv = x.run(lambda: self._condense(solver), solver)
-            if x.solves:
-                # z = s + rho lam / S_ii-scaled: the prox scaling comes from the body's own stiffness. A large factor
-                # predicts the states from the contact force (measured: factor 1 cycles on memory_slab, 10 and 100
-                # settle)
-                stiffness = schur.stiffness if schur is not None else np.diag(S_inv)
-                rho = 100.0 / stiffness if nodes.size else np.zeros(0)
-            split = solver.split(nodes.C) if S_inv is not None and x.solves and self.vertices_only else None
-            kept = self.candidates.operator(solver) if self.candidates is not None else None
-            self._operators[key] = [M, solver, S_inv, rho, schur, split, kept]
-        self._operators.move_to_end(key)
-        self.M, self.solver, self.S_inv, self.rho, self.schur, self.split, self.kept = self._operators[key]
-        self._weights = weights
+        op = self._op = self.operators.get(weights)
+        self.M, self.solver, self.S_inv, self.rho, self.schur = op.M, op.solver, op.S_inv, op.rho, op.schur
+        self.split, self.kept, self._weights = op.split, op.kept, list(weights)
+
+    def _build(self, weights: tuple, keep: bool) -> MemoryOperator:
+        """K_A + sum_i w_i K_Ci factored, with its condensed system or the coupled solver's operator; the
+        factorization keeps the contact candidates where ``keep``."""
+        d, x, nodes = self.d, self.exchange, self.nodes
+        M = self.memory.operator(weights) if self.memory is not None else d.elastic.mat
+        solver = d.step_factor(M)
+        schur = S_inv = rho = None
+        if self.coupled is not None:
+            diagonal = x.diagonal(M)
+            schur = SchurOperator(x.proxy(solver), x.view.ndof, nodes.C, nodes.sign, diagonal, nodes.B, True) \
+                if x.solves else None
+        else:
+            S_inv = x.run(lambda: self._condense(solver), solver)
+        if x.solves:
+            # z = s + rho lam / S_ii-scaled: the prox scale from the body's own stiffness. A large factor predicts the
+            # states from the contact force (measured: factor 1 cycles on memory_slab, 10 and 100 settle)
+            stiffness = schur.stiffness if schur is not None else np.diag(S_inv)
+            rho = 100.0 / stiffness if nodes.size else np.zeros(0)
+        split = solver.split(nodes.C) if S_inv is not None and x.solves and self.vertices_only else None
+        kept = self.candidates.operator(solver) if keep else None
+        return MemoryOperator(M, solver, split=split, kept=kept, S_inv=S_inv, rho=rho, schur=schur)
 
     def _condense(self, solver):
         """The dense contact stiffness S^-1 = (B K^-1 B^T)^-1, one back-substitution per contact point."""
@@ -184,11 +197,9 @@ class MemoryVI(ErrorControlled, Scheme):
 
     def _condensed_fallback(self):
         """(S_inv, rho) of the current operator for the condensed solver, built once (the coupled solve's fallback)."""
-        entry = next(e for e in self._operators.values() if e[1] is self.solver)
-        if entry[2] is None:
-            entry[2] = self._condense(self.solver)
-        self.S_inv = entry[2]
-        return entry[2], 100.0 / np.diag(entry[2])  # (the condensed solver's own scale; the coupled one keeps its)
+        op = self._op
+        self.S_inv = op.S_inv = op.S_inv if op.S_inv is not None else self._condense(self.solver)
+        return self.S_inv, 100.0 / np.diag(self.S_inv)  # (the condensed solver's own scale; the coupled one keeps its)
 
     # -- steps ----------------------------------------------------------------------------------------------------
     def start(self, t0: float) -> None:

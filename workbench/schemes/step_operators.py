@@ -1,5 +1,7 @@
-"""The step operators a0 K_A + K_G of Model A's implicit schemes, factored once per a0 and cached
-(:class:`~workbench.schemes.implicit_euler.ImplicitEuler` and BDF2).
+"""The step operators of the implicit schemes, factored once per key and cached: a0 K_A + K_G per a0 for Model A
+(:class:`~workbench.schemes.implicit_euler.ImplicitEuler` and BDF2), K_A + sum_i w_i K_Ci per tuple of the memory
+terms' weights w for Model B (:class:`~workbench.schemes.memory_vi.MemoryVI`: one operator, K_A, unless the memory
+rule is the trapezoid).
 
 A run of fixed steps k mostly meets one operator, its own: a0 of a step k after steps of k (1/k for backward Euler,
 3/(2k) for BDF2). It meets others too, each for a step or two: a landing on a snapshot off the grid, BDF2's first
@@ -33,8 +35,8 @@ class StepOperator:
     newton: object = None
     split: object = None
     kept: list | None = None
-    #: The a0 it was built from (:meth:`StepOperators.state`).
-    a0: float = 0.0
+    #: The a0 it was built from (:meth:`StepOperators.state`; Model B: the tuple of weights).
+    a0: float | tuple = 0.0
 
 
 class StepOperators:
@@ -66,8 +68,16 @@ class StepOperators:
         self._rented = Counter()  # (steps of each operator on the coupled solver while the candidates are not kept)
 
     @staticmethod
-    def key(a0: float) -> float:
-        return float(f"{a0:.11g}")  # (a0 snapped to a grid by BDF2 comes back equal only to round-off)
+    def key(a0: float | tuple) -> float | tuple:
+        """``a0`` (or each number of a tuple) to 11 digits: a0 snapped to a grid by BDF2, and the steps of a uniform
+        grid (t_n - t_(n-1) differs in the last bits), come back equal only to round-off.
+
+        >>> StepOperators.key((0.024187090179797810, 0.0)) == StepOperators.key((0.024187090179797865, 0.0))
+        True
+        """
+        if isinstance(a0, tuple):
+            return tuple(float(f"{w:.11g}") for w in a0)
+        return float(f"{a0:.11g}")
 
     def holds(self, a0: float) -> bool:
         """Whether the operator of ``a0`` is factored (else :meth:`get` factors it, and may drop another)."""
