@@ -177,6 +177,10 @@ def energy_product(tensor, u, w, dim: int):
     eu, ew = strain(u, dim), strain(w, dim)
     if dim == 1:
         return tensor(eu) * ew
+    if isinstance(tensor, Isotropic):
+        # the same form, which NGSolve assembles faster with div u and no stress tensor evaluated (the hemisphere's
+        # K at 47k dofs, P1: 1.68 s against 2.06 s, medians of 3; the trace of eps in div's place: 2.08 s)
+        return tensor.lam * ngs.div(u) * ngs.div(w) + tensor.two_mu * ngs.InnerProduct(eu, ew)
     return ngs.InnerProduct(tensor(eu), ew)
 
 
