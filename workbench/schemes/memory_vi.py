@@ -163,7 +163,7 @@ class MemoryVI(ErrorControlled, Scheme):
         """K_A + sum_i w_i K_Ci for a step of length k, factored once per weights (:class:`StepOperators`)."""
         weights = self._weights_of(k)
         if not self.operators.holds(weights):
-            self.M = self.solver = self.S_inv = self.schur = self.split = self.kept = None  # (freed with theirs)
+            self._op = self.M = self.solver = self.S_inv = self.schur = self.split = self.kept = None  # (freed)
         op = self._op = self.operators.get(weights)
         self.M, self.solver, self.S_inv, self.rho, self.schur = op.M, op.solver, op.S_inv, op.rho, op.schur
         self.split, self.kept, self._weights = op.split, op.kept, list(weights)
