@@ -280,3 +280,30 @@ def test_a_scheme_frees_the_factor_it_drops_before_it_factors_the_next(monkeypat
     assert len(made) == 2 and alive_at == [0, 0]
     assert np.abs(ds.u_probe - cached.u_probe).max() <= 1e-12 * np.abs(cached.u_probe).max()
     assert solvers.factors_kept(3, 200_000, "auto", 4) == (1 if pardiso.available() else 4)  # (1.5 GB each)
+
+
+def test_a_body_with_A_tau_G_factors_K_G_once_for_every_step_size(monkeypatch):
+    """hertz3d has A = tau G, so each implicit step operator a0 K_A + K_G is (a0 tau + 1) K_G. With the coupled solver
+    under error control, BDF2's steps take many sizes; one factorization of K_G serves them all (SharedFactor), where
+    before each size had its own. The run takes the same steps and equals the one with a factor per operator to
+    round-off (K_A is assembled, not tau K_G: measured 4e-14 of u). Not shared: a body whose A is no multiple of G,
+    and the condensed solver (its solve in parts needs a factor that keeps the contact dofs)."""
+    from workbench.schemes import step_operators
+    from workbench.schemes.implicit_euler import ImplicitEuler
+
+    made = []
+    factor = solvers.factor
+    monkeypatch.setattr(solvers, "factor", lambda *args, **kwargs: made.append(1) or factor(*args, **kwargs))
+    kw = dict(h_contact=0.05, scheme="bdf2", rtol=1e-2, T=0.3, contact_solver="coupled", progress=False)
+    shared = workbench.run("hertz3d", **kw)
+    assert len(made) == 1
+    made.clear()
+    monkeypatch.setattr(step_operators.SharedFactor, "of", classmethod(lambda cls, d, scheme: None))
+    own = workbench.run("hertz3d", **kw)
+    assert len(made) > 5 and shared.sizes["time"] == own.sizes["time"]
+    for name in ("u_probe", "contact_pressure"):
+        x, y = shared[name].values, own[name].values
+        assert np.nanmax(np.abs(x - y)) <= 1e-11 * np.nanmax(np.abs(y)), name
+    monkeypatch.undo()
+    assert ImplicitEuler(discretisation.build(workbench.scene("block", h=0.25))).shared is None  # (A no multiple)
+    assert ImplicitEuler(discretisation.build(workbench.scene("hertz3d", h_contact=0.05))).shared is None  # condensed

@@ -93,6 +93,26 @@ class Solver:
         return None
 
 
+class Scaled(Solver):
+    """The solver of c K from a direct ``solver`` of K: one factor serves every multiple of K (a Kelvin-Voigt body
+    with A = tau G, whose step operators a0 K_A + K_G are (a0 tau + 1) K_G).
+
+    >>> K = sp.diags([-1.0, 2.0, -1.0], [-1, 0, 1], shape=(5, 5)).tocsr()
+    >>> out = np.zeros(5); Scaled(BandedCholesky(K, np.arange(1, 5)), 2.0).solve(np.ones(5), out); out.tolist()
+    [0.0, 1.0, 1.5, 1.5, 1.0]
+    """
+
+    def __init__(self, solver: Solver, c: float):
+        self.base, self.c, self.name = solver, float(c), solver.name
+
+    def solve(self, rhs: np.ndarray, out: np.ndarray) -> None:
+        self.base.solve(rhs, out)
+        out /= self.c
+
+    def solve_many(self, R: np.ndarray) -> np.ndarray:
+        return self.base.solve_many(R) / self.c
+
+
 def to_scipy(mat) -> sp.csr_matrix:
     """An NGSolve sparse matrix as SciPy CSR (the full matrix, also for symmetric storage)."""
     rows, cols, vals = mat.COO()

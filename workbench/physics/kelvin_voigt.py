@@ -71,6 +71,19 @@ class Isotropic:
     def scaled(self, factor: float) -> "Isotropic":
         return Isotropic(factor * self.lam, factor * self.two_mu, self.plane_strain)
 
+    def multiple_of(self, other) -> float | None:
+        """f where this tensor is f times ``other`` (to 1e-12 of its moduli), else None. A Kelvin-Voigt body with
+        A = tau G has K_A = tau K_G, so every implicit step operator a0 K_A + K_G is a multiple of K_G.
+
+        >>> G = Isotropic(576.9, 769.2)
+        >>> round(G.scaled(0.05).multiple_of(G), 12), Isotropic(1.0, 769.2).multiple_of(G)
+        (0.05, None)
+        """
+        if not isinstance(other, Isotropic) or other.plane_strain != self.plane_strain or other.two_mu <= 0.0:
+            return None
+        f = self.two_mu / other.two_mu
+        return f if abs(self.lam - f * other.lam) <= 1e-12 * max(abs(self.lam), self.two_mu) else None
+
     def apply(self, strain: np.ndarray) -> np.ndarray:
         """The stress of strains given as components (..., COMPONENTS order), the same layout back."""
         dim = {3: 2, 6: 3}[strain.shape[-1]]
@@ -103,6 +116,10 @@ class Scalar:
 
     def scaled(self, factor: float) -> "Scalar":
         return Scalar(factor * self.modulus)
+
+    def multiple_of(self, other) -> float | None:
+        """f where this modulus is f times ``other``'s (:meth:`Isotropic.multiple_of`)."""
+        return self.modulus / other.modulus if isinstance(other, Scalar) and other.modulus > 0.0 else None
 
     def apply(self, strain: np.ndarray) -> np.ndarray:
         return self.modulus * strain
@@ -138,6 +155,10 @@ class Voigt:
 
     def scaled(self, factor: float) -> "Voigt":
         return Voigt(factor * self.C, self.dim, self.name)
+
+    def multiple_of(self, other) -> float | None:
+        """None: a user's matrix is not taken as a multiple of another (:meth:`Isotropic.multiple_of`)."""
+        return None
 
     def apply(self, strain: np.ndarray) -> np.ndarray:
         engineering = strain.copy()

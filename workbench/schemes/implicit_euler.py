@@ -45,7 +45,7 @@ from .candidates import Candidates
 from .facet_candidates import FacetCandidates
 from .halfspace import HalfSpace
 from .model_a import KelvinVoigtScheme, kink_event
-from .step_operators import StepOperator, StepOperators
+from .step_operators import SharedFactor, StepOperator, StepOperators
 
 
 class ImplicitEuler(ErrorControlled, KelvinVoigtScheme):
@@ -55,7 +55,9 @@ class ImplicitEuler(ErrorControlled, KelvinVoigtScheme):
     (a0, h_n) from :meth:`coefficients` (backward Euler: a0 = 1/k, h_n = -u_{n-1}/k;
     :class:`~workbench.schemes.bdf2.BDF2` overrides them), so that v_n = a0 u_n + h_n.
     The matrix a0 K_A + K_G is factored and condensed once per distinct a0 (a small cache,
-    so that an adaptive run that returns to a step size reuses it).
+    so that an adaptive run that returns to a step size reuses it); where A = tau G and the
+    steps only solve with it, K_G's one factor serves every a0
+    (:class:`~workbench.schemes.step_operators.SharedFactor`).
     """
 
     name = "implicit"
@@ -92,6 +94,7 @@ class ImplicitEuler(ErrorControlled, KelvinVoigtScheme):
         self.coupled = self.contact and d.numerics.coupled_contact(size, self.method, solvers.forms_schur(self.method))
         self.bonding = d.model.bonding
         self.candidates = FacetCandidates.of(d, self.op, self.method, self.coupled)
+        self.shared = SharedFactor.of(d, self)  # (A = tau G: one factor for every a0, where the steps allow it)
         n = d.numerics
         own = None if n.adaptive else StepOperators.key(self._constant_a0(n.k))
         self.operators = StepOperators(self.cache_size, own, self.candidates, self._build)
@@ -135,7 +138,7 @@ class ImplicitEuler(ErrorControlled, KelvinVoigtScheme):
         d = self.d
         M = d.viscous.mat.CreateMatrix()
         M.AsVector().data = a0 * d.viscous.mat.AsVector() + d.elastic.mat.AsVector()
-        solver = d.step_factor(M)
+        solver = d.step_factor(M) if self.shared is None else self.shared.solver(a0)
         diagonal = self.exchange.diagonal(M) if self.coupled else None  # (on every process: it gathers)
         newton = self.exchange.run(lambda: self._newton(solver, diagonal), solver) if self.contact else None
         split = solver.split(self.op.C) if self.op is not None and not self.coupled else None

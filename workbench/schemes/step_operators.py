@@ -21,6 +21,7 @@ from __future__ import annotations
 from collections import Counter, OrderedDict
 from dataclasses import dataclass
 
+from ..discrete import solvers
 from .base import make_room
 
 
@@ -115,3 +116,40 @@ class StepOperators:
 
     def restore(self, a0s: list) -> None:
         self._entries = OrderedDict((self.key(a0), float(a0)) for a0 in a0s)
+
+
+class SharedFactor:
+    """One factor of K_G for every step operator of a Kelvin-Voigt body with A = tau G: a0 K_A + K_G = (a0 tau + 1)
+    K_G, so the operator of any a0 is a multiple of K_G and its solve K_G's scaled (:class:`solvers.Scaled`). BDF2
+    meets five operators in a run of fixed steps and error control one per step size; they then cost one
+    factorization. Only where a step needs nothing of its operator's factor but solves: the coupled solver without
+    the candidates (whose factorization keeps them), or no contact at all; not the condensed solver (its solve in
+    parts needs a factor that keeps the contact dofs), an iterative solver or several processes.
+
+    >>> import workbench
+    >>> from workbench.discrete import discretisation
+    >>> from workbench.schemes.implicit_euler import ImplicitEuler
+    >>> d = discretisation.build(workbench.scene("hertz3d", h_contact=0.05, contact_solver="coupled"))
+    >>> shared = ImplicitEuler(d).shared
+    >>> round(shared.tau, 12), shared.solver(50.0).c  # (A = tau G, tau = 0.05: a0 = 50 is 3.5 K_G)
+    (0.05, 3.5)
+    """
+
+    def __init__(self, d, tau: float):
+        self.d, self.tau, self.factor = d, tau, None
+
+    @classmethod
+    def of(cls, d, scheme):
+        """The shared factor of ``scheme`` (an implicit Model A scheme on ``d``), or None where A is not a multiple of
+        G or the steps need more than solves with their operators."""
+        tau = d.model.viscous.multiple_of(d.model.elastic)
+        solves_only = (scheme.coupled and scheme.candidates is None) or not scheme.contact
+        if tau is None or not solves_only or d.world.size != 1 or scheme.method in ("cg", "mixed"):
+            return None
+        return cls(d, tau)
+
+    def solver(self, a0: float) -> solvers.Scaled:
+        """The solver of a0 K_A + K_G (K_G factored at the first call)."""
+        if self.factor is None:
+            self.factor = self.d.step_factor(self.d.elastic.mat)
+        return solvers.Scaled(self.factor, a0 * self.tau + 1.0)
