@@ -120,8 +120,8 @@ class StepOperators:
 
 class SharedFactor:
     """One factor of K_G for every step operator of a Kelvin-Voigt body with A = tau G: a0 K_A + K_G = (a0 tau + 1)
-    K_G, so the operator of any a0 is a multiple of K_G and its solve K_G's scaled (:class:`solvers.Scaled`). BDF2
-    meets five operators in a run of fixed steps and error control one per step size; they then cost one
+    K_G, so the operator of any a0 is a multiple of K_G and its solve K_G's scaled (:class:`solvers.Scaled`). The
+    operators a run meets (BDF2's start, the landings, one per step size under error control) then cost one
     factorization. Only where a step needs nothing of its operator's factor but solves: the coupled solver without
     the candidates (whose factorization keeps them), or no contact at all; not the condensed solver (its solve in
     parts needs a factor that keeps the contact dofs), an iterative solver or several processes.
