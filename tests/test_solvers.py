@@ -1,4 +1,6 @@
 """The banded Cholesky (RCM order) and MKL PARDISO's Cholesky solve the same systems as NGSolve's sparse Cholesky."""
+import gc
+
 import numpy as np
 import pytest
 import scipy.sparse as sp
@@ -259,7 +261,9 @@ def test_a_scheme_frees_the_factor_it_drops_before_it_factors_the_next(monkeypat
     its backward-Euler start and then its own operator, Model B's vi (trapezoid rule) the operator of u(0) and then the
     steps'. With one kept, no earlier factor is alive when the next is made (measured: BDF2 on the P2 block at 271k
     dofs peaked at 5.67 GB holding both, 3.36 GB now); with the default cache one is. The coupled solver's remembered
-    products hold their operator weakly, so they keep no dropped factor alive. The results are the same."""
+    products hold their operator weakly, so they keep no dropped factor alive. The results are the same. A finished
+    run frees its factors as it returns (a cycle through the scheme kept them until the garbage collector ran: a
+    session's next run of memory_hertz3d at 47k dofs peaked at 1219 MB against 873 MB)."""
     import weakref
 
     made, alive_at = [], []
@@ -272,7 +276,12 @@ def test_a_scheme_frees_the_factor_it_drops_before_it_factors_the_next(monkeypat
         return out
 
     monkeypatch.setattr(solvers, "factor", tracked)
-    cached = workbench.run(name, progress=False, **kw)
+    gc.disable()  # (what a run leaves in a reference cycle stays alive, with its factors, until the collector runs)
+    try:
+        cached = workbench.run(name, progress=False, **kw)
+        assert all(ref() is None for ref in made)  # (the run's scheme freed as it returns: no cycle holds it)
+    finally:
+        gc.enable()
     assert len(made) == 2 and alive_at == [0, 1]
     made.clear(), alive_at.clear()
     monkeypatch.setattr(solvers, "factors_kept", lambda *args: 1)

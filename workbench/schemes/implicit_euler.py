@@ -97,7 +97,7 @@ class ImplicitEuler(ErrorControlled, KelvinVoigtScheme):
         self.shared = SharedFactor.of(d, self)  # (A = tau G: one factor for every a0, where the steps allow it)
         n = d.numerics
         own = None if n.adaptive else StepOperators.key(self._constant_a0(n.k))
-        self.operators = StepOperators(self.cache_size, own, self.candidates, self._build)
+        self.operators = StepOperators(self.cache_size, own, self.candidates)
         self.M = self.newton = self.solver = self.split = self.kept = None  # (the step's, from _prepare)
         self.iterations = self.passes = self.inner = 0
         self.resolved = True
@@ -128,7 +128,7 @@ class ImplicitEuler(ErrorControlled, KelvinVoigtScheme):
         """The operator a0 K_A + K_G of the step (:class:`~workbench.schemes.step_operators.StepOperators`)."""
         if not self.operators.holds(a0):
             self.M = self.solver = self.newton = self.split = self.kept = None  # (freed with theirs, if dropped)
-        op = self.operators.get(a0)
+        op = self.operators.get(a0, self._build)
         self.M, self.solver, self.newton, self.split, self.kept = op.M, op.solver, op.newton, op.split, op.kept
         self.resolved = self.bonding is None or self.bonding.resolved(k, self.d.model.beta0)
 

@@ -133,8 +133,8 @@ class MemoryVI(ErrorControlled, Scheme):
         self._balance = None  # f - memory of the last equilibrium (only for the reaction of pinned contact nodes)
         # (the run's own operator, its step's: none under error control with the trapezoid, which changes each step)
         own = None if d.numerics.adaptive and any(self._weights_of(1.0)) else self._weights_of(d.numerics.k)
-        self.operators = StepOperators(self.cache_size, None if own is None else StepOperators.key(own),
-                                       self.candidates, self._build)
+        own = None if own is None else StepOperators.key(own)
+        self.operators = StepOperators(self.cache_size, own, self.candidates)
         self._use(0.0)
         self.z = np.zeros(d.ndof)
         self.rhs = d.u.vec.CreateVector()
@@ -164,7 +164,7 @@ class MemoryVI(ErrorControlled, Scheme):
         weights = self._weights_of(k)
         if not self.operators.holds(weights):
             self._op = self.M = self.solver = self.S_inv = self.schur = self.split = self.kept = None  # (freed)
-        op = self._op = self.operators.get(weights)
+        op = self._op = self.operators.get(weights, self._build)
         self.M, self.solver, self.S_inv, self.rho, self.schur = op.M, op.solver, op.S_inv, op.rho, op.schur
         self.split, self.kept, self._weights = op.split, op.kept, list(weights)
 
