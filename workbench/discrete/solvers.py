@@ -98,7 +98,8 @@ class Scaled(Solver):
     with A = tau G, whose step operators a0 K_A + K_G are (a0 tau + 1) K_G).
 
     >>> K = sp.diags([-1.0, 2.0, -1.0], [-1, 0, 1], shape=(5, 5)).tocsr()
-    >>> out = np.zeros(5); Scaled(BandedCholesky(K, np.arange(1, 5)), 2.0).solve(np.ones(5), out); out.round(12).tolist()
+    >>> out = np.zeros(5)
+    >>> Scaled(BandedCholesky(K, np.arange(1, 5)), 2.0).solve(np.ones(5), out); out.round(12).tolist()
     [0.0, 1.0, 1.5, 1.5, 1.0]
     """
 
