@@ -196,7 +196,7 @@ class DenseSchur:
     """The compliance S = (M^-1)_CC of a few contact dofs, formed (the inverse of their condensed stiffness, which a
     factorization that keeps them last gives): :class:`SchurOperator`'s products as dense ones, where a
     back-substitution would cost a factor's worth (:mod:`workbench.schemes.facet_candidates`). ``stiffness``: the
-    diagonal of S^-1, exactly.
+    diagonal of S^-1, exactly. ``compliance``: S itself, where the caller holds it already.
 
     It also serves :class:`CoupledNewton` as its ``halfspace``: the springs' system is then preconditioned by its
     own inverse, and its conjugate gradients end after one iteration (:meth:`springs_compliance`).
@@ -206,8 +206,8 @@ class DenseSchur:
     ([2.0, 1.0], [2.0, 2.0])
     """
 
-    def __init__(self, stiffness: np.ndarray):
-        self.compliance = inverse(stiffness)
+    def __init__(self, stiffness: np.ndarray, compliance: np.ndarray | None = None):
+        self.compliance = inverse(stiffness) if compliance is None else compliance
         self.stiffness = np.diag(stiffness).copy()
         self.largest = len(stiffness)  # (every set of springs: read in place, never computed)
         self.applications = 0

@@ -35,7 +35,6 @@ from __future__ import annotations
 
 import numpy as np
 
-from ..discrete.solvers import inverse
 from ..physics.unilateral import SEPARATED
 from .halfspace import dense_points
 
@@ -133,9 +132,8 @@ class Candidates:
         found = solver.kept(self.nodes.C[P], again)
         if found is None:
             return None
-        stiffness, split = found
+        stiffness, compliance, split = found  # (the compliance: the active set's systems on the forces, ContactNodes)
         self.kept = max(self.kept, P.size)
-        compliance = inverse(stiffness)  # (the active set's systems on the forces: ContactNodes)
         return [P, stiffness, split, 100.0 / np.diag(stiffness), compliance, solver]  # (rho: the condensed solver's)
 
     def equilibrium(self, operator, rhs: np.ndarray, u: np.ndarray, time: float):

@@ -23,20 +23,25 @@ file, 59k dofs, 2238 of 2973 contact vertices in contact: 18.5 s against 33.8 s 
 and the candidates are given up for the run.
 
 Not for a glue or a friction (their forces act on the whole bonded side, not where it touches), a flat side (every
-gap equal: nothing tells the points apart), a moving clamp, several processes, a solver that cannot keep dofs last
-(the banded and iterative ones), or error control. Model A's step operator a0 K_A + K_G changes with the step, so
-an error-controlled run factors it often, and a factorization that keeps the candidates costs about twice a plain
-one: measured on the hemisphere at 47k dofs with BDF2 at rtol = 1e-3 (389 solves, 67 factorizations), 230 s with
-the candidates against 228 s without (the factorizations 154 against 78 s, the rest 76 against 149 s): a tie, so
-they stay out (356 s against 277 s on the finer a0 grid of before, 113 factorizations).
+gap equal: nothing tells the points apart), a moving clamp, several processes, or a solver that cannot keep dofs
+last (the banded and iterative ones).
 
-For the same reason a run of fixed steps keeps them in the factorization of its own operator, the a0 of a step k
-after steps of k (:mod:`workbench.schemes.step_operators`). Its other operators (a landing on a snapshot off the
-grid, BDF2's first step and the step after each change of size) serve a step or two each, and those steps are the
-coupled solver's on a plain factor, until one of them has served ``StepOperators.RENT_STEPS`` steps; its
-factorization is then made again keeping the candidates. On ``hertz3d`` with BDF2 (five operators, 52 steps) that
-took the run from 46.6 to 37.1 s at 47k dofs and, with the own operator dropped last from a cache of two, from 264.7
-to 137.3 s at 106k (docs/schemes.md, "The candidates kept for the run's own operator").
+Model A's step operator a0 K_A + K_G changes with the step. Where A = tau G (the Hertz scenes), every operator is a
+multiple of K_G, and K_G's one factorization, keeping the candidates, serves them all
+(:class:`~workbench.schemes.step_operators.SharedFactor`): every step is the candidates', under error control too.
+Where A is no multiple of G, each operator has its own factorization, and one that keeps the candidates costs
+about twice a plain one. Under error control, which factors often, they then stay out: measured on the hemisphere
+at 47k dofs with BDF2 at rtol = 1e-3 before the factor was shared (389 solves, 67 factorizations), 230 s with the
+candidates against 228 s without (the factorizations 154 against 78 s, the rest 76 against 149 s), a tie.
+
+For the same reason a run of fixed steps with a factor per operator keeps them in the factorization of its own
+operator, the a0 of a step k after steps of k (:mod:`workbench.schemes.step_operators`). Its other operators (a
+landing on a snapshot off the grid, BDF2's first step and the step after each change of size) serve a step or two
+each, and those steps are the coupled solver's on a plain factor, until one of them has served
+``StepOperators.RENT_STEPS`` steps; its factorization is then made again keeping the candidates. On ``hertz3d`` with
+BDF2 (five operators, 52 steps), before its operators shared one factor, that took the run from 46.6 to 37.1 s at
+47k dofs and, with the own operator dropped last from a cache of two, from 264.7 to 137.3 s at 106k
+(docs/schemes.md, "The candidates kept for the run's own operator").
 
 Measured with fixed steps on the hemisphere (``hertz3d`` at its defaults, 52 steps of backward Euler;
 ``python studies/model_a_candidates.py``, docs/schemes.md, "Model A's implicit steps on candidate facets"): at 47k
@@ -89,18 +94,20 @@ class FacetCandidates:
         self.gap_Q = side.gap0[others] if others.size else None
 
     @classmethod
-    def of(cls, d, op, method: str, coupled: bool):
+    def of(cls, d, op, method: str, coupled: bool, shared: bool = False):
         """The candidates of the contact operator ``op`` where ``auto`` took the coupled solver (``coupled``) on a
-        curved 3D side with a normal compliance alone and fixed steps, for a factor ``method`` (as many dofs as
+        curved 3D side with a normal compliance alone, for a factor ``method`` (as many dofs as
         :meth:`Candidates.most` for the run's steps T / k; ``whole`` where the side's dofs are at most twice
-        ``dense_points(ndof, method, 3)``); else None. Not under error control: Model A's step
-        operator changes with the step, and a factorization that keeps the candidates costs about twice a plain
+        ``dense_points(ndof, method, 3)``); else None. Under error control only where the step operators share one
+        factor (``shared``, :class:`~workbench.schemes.step_operators.SharedFactor`): Model A's step operator
+        changes with the step, and a factorization of its own that keeps the candidates costs about twice a plain
         one, for the few steps each then serves (module docs)."""
         n = d.numerics
         if (not coupled or op is None or d.dim != 3 or op.tangential or d.beta is not None or d.moves_clamp
-                or n.contact_solver != "auto" or op.side.gap0 is None or n.adaptive):
+                or n.contact_solver != "auto" or op.side.gap0 is None or (n.adaptive and not shared)):
             return None
-        chosen = cls.choose(op.side.T_nu, op.side.element, op.side.gap0, Candidates.most(d.ndof, method, n.T / n.k))
+        steps = np.inf if n.adaptive else n.T / n.k  # (error control takes many steps, as a rule: the upper bound)
+        chosen = cls.choose(op.side.T_nu, op.side.element, op.side.gap0, Candidates.most(d.ndof, method, steps))
         # (every dof where the dense work on them is what the condensed solver's rule affords Model B: twice it)
         return None if chosen is None else cls(op, *chosen, whole=op.size <= 2 * dense_points(d.ndof, method, 3.0))
 
@@ -152,9 +159,9 @@ class FacetCandidates:
         found = solver.kept(self.C, again)
         if found is None:
             return None
-        stiffness, split = found
+        stiffness, compliance, split = found
         self.kept = max(self.kept, self.C.size)
-        schur = DenseSchur(stiffness)  # (also the springs' exact preconditioner, in the half-space's place)
+        schur = DenseSchur(stiffness, compliance)  # (also the springs' exact preconditioner, in the half-space's place)
         return [split, CoupledNewton(schur, self.sub, halfspace=schur), solver]
 
     def step(self, operator, rhs: np.ndarray, u: np.ndarray, guess, time: float, label: str = ""):

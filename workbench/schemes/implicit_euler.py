@@ -93,11 +93,11 @@ class ImplicitEuler(ErrorControlled, KelvinVoigtScheme):
         self.cache_size = solvers.factors_kept(d.dim, d.ndof_global, self.method, self.cache_size)
         self.coupled = self.contact and d.numerics.coupled_contact(size, self.method, solvers.forms_schur(self.method))
         self.bonding = d.model.bonding
-        self.candidates = FacetCandidates.of(d, self.op, self.method, self.coupled)
-        self.shared = SharedFactor.of(d, self)  # (A = tau G: one factor for every a0, where the steps allow it)
+        self.shared = SharedFactor.of(d, self.method)  # (A = tau G: one factor for every a0)
+        self.candidates = FacetCandidates.of(d, self.op, self.method, self.coupled, self.shared is not None)
         n = d.numerics
         own = None if n.adaptive else StepOperators.key(self._constant_a0(n.k))
-        self.operators = StepOperators(self.cache_size, own, self.candidates)
+        self.operators = StepOperators(self.cache_size, own, self.candidates, self.shared is not None)
         self.M = self.newton = self.solver = self.split = self.kept = None  # (the step's, from _prepare)
         self.iterations = self.passes = self.inner = 0
         self.resolved = True

@@ -15,6 +15,9 @@ step (backward Euler) and the step after each change of size. Two choices follow
   operator's steps are the coupled solver's on a plain factor until it has served :attr:`StepOperators.RENT_STEPS`;
   its factorization is then made again keeping them. The rule is the ski rental's: an operator that serves a landing
   or two stays plain, and one that keeps serving costs at most about twice the better choice.
+
+Where every operator is a multiple of one matrix (a body with A = tau G, :class:`SharedFactor`), both choices fall
+away: one factorization, keeping the candidates, serves every operator.
 """
 from __future__ import annotations
 
@@ -66,8 +69,11 @@ class StepOperators:
     #: On ``hertz3d`` the two balance after about 11 steps at 47k dofs and 12 at 106k (docs/schemes.md).
     RENT_STEPS = 10
 
-    def __init__(self, size: int, own, candidates):
+    def __init__(self, size: int, own, candidates, shared: bool = False):
         self.size, self.own, self.candidates = size, own, candidates
+        #: Whether the operators share one factor (:class:`SharedFactor`): each keeps the candidates then, at no
+        #: factorization's cost.
+        self.shared = shared
         self._entries = OrderedDict()
         self._rented = Counter()  # (steps of each operator on the coupled solver while the candidates are not kept)
 
@@ -104,7 +110,8 @@ class StepOperators:
         return operator
 
     def _keeps(self, key: float) -> bool:
-        return self.candidates is not None and (key == self.own or self._rented[key] >= self.RENT_STEPS)
+        return self.candidates is not None and (self.shared or key == self.own
+                                                or self._rented[key] >= self.RENT_STEPS)
 
     def _rent(self, key: float, operator: StepOperator) -> None:
         """One more step of ``operator`` on the coupled solver; at :attr:`RENT_STEPS`, its factorization is made
@@ -125,9 +132,9 @@ class SharedFactor:
     """One factor of K_G for every step operator of a Kelvin-Voigt body with A = tau G: a0 K_A + K_G = (a0 tau + 1)
     K_G, so the operator of any a0 is a multiple of K_G and its solve K_G's scaled (:class:`solvers.Scaled`). The
     operators a run meets (BDF2's start, the landings, one per step size under error control) then cost one
-    factorization. Only where a step needs nothing of its operator's factor but solves: the coupled solver without
-    the candidates (whose factorization keeps them), or no contact at all; not the condensed solver (its solve in
-    parts needs a factor that keeps the contact dofs), an iterative solver or several processes.
+    factorization. What that factorization gives about the contact dofs is scaled as well: the condensed solver's
+    stiffness and solve in parts, and the contact candidates' (a factorization that keeps them last, made once:
+    every operator keeps them then, also under error control). Not for an iterative solver or several processes.
 
     >>> import workbench
     >>> from workbench.discrete import discretisation
@@ -140,19 +147,19 @@ class SharedFactor:
 
     def __init__(self, d, tau: float):
         self.d, self.tau, self.factor = d, tau, None
+        self.found = {}  # (what K_G's factorization gave about the contact dofs: solvers.Scaled)
 
     @classmethod
-    def of(cls, d, scheme):
-        """The shared factor of ``scheme`` (an implicit Model A scheme on ``d``), or None where A is not a multiple of
-        G or the steps need more than solves with their operators."""
+    def of(cls, d, method: str):
+        """The shared factor of an implicit Model A scheme on ``d`` with the linear solver ``method``, or None where A
+        is not a multiple of G, the solver is iterative or the run has several processes."""
         tau = d.model.viscous.multiple_of(d.model.elastic)
-        solves_only = (scheme.coupled and scheme.candidates is None) or not scheme.contact
-        if tau is None or not solves_only or d.world.size != 1 or scheme.method in ("cg", "mixed"):
+        if tau is None or d.world.size != 1 or method in ("cg", "mixed"):
             return None
         return cls(d, tau)
 
     def solver(self, a0: float) -> solvers.Scaled:
-        """The solver of a0 K_A + K_G (K_G factored at the first call)."""
+        """The solver of a0 K_A + K_G (K_G factored at the first call that needs it)."""
         if self.factor is None:
             self.factor = self.d.step_factor(self.d.elastic.mat)
-        return solvers.Scaled(self.factor, a0 * self.tau + 1.0)
+        return solvers.Scaled(self.factor, a0 * self.tau + 1.0, self.found)
