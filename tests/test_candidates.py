@@ -59,6 +59,26 @@ def test_a_zone_that_outgrows_the_candidates_is_solved_on_every_point(monkeypatc
     _agree(auto, workbench.run("memory_hertz3d", contact_solver="condensed", **kw))
 
 
+def test_a_shared_factor_made_again_for_a_grown_zone_serves_every_operator(monkeypatch):
+    """As above with the trapezoid rule and a relaxation tensor that is a multiple of A: the operators (t = 0's, the
+    run's own, the landings') share K_A's factorization. Where the zone outgrows the candidates in one of them, that
+    factorization is made again keeping every point, and each other operator takes it up at its next step instead of
+    solving on a factor that no longer keeps its candidates: two factorizations in all, no conjugate gradient
+    iteration, equal to the condensed solver with a factor per operator to 1e-9."""
+    from workbench.schemes import step_operators
+
+    made = []
+    Factor = pardiso.Factor
+    monkeypatch.setattr(pardiso, "Factor", lambda *args, **kwargs: made.append(1) or Factor(*args, **kwargs))
+    monkeypatch.setattr(Candidates, "most", classmethod(lambda cls, ndof, method, steps: 150))
+    kw = dict(h_contact=0.01, k=0.1, memory_rule="trapezoid", prony=[[-300.0, 0.3, 0.5]], progress=False)
+    auto = workbench.run("memory_hertz3d", **kw)
+    assert auto.attrs["contact_candidates"] == 1290 and auto.attrs["contact_candidates_missed"] == 0
+    assert len(made) == 2 and int(auto.linear_iterations.sum()) == 0
+    monkeypatch.setattr(step_operators.SharedFactor, "of_memory", classmethod(lambda cls, d, method, trapezoid: None))
+    _agree(auto, workbench.run("memory_hertz3d", contact_solver="condensed", **kw))
+
+
 def test_a_zone_that_outgrows_what_the_condensed_solver_affords_is_handed_to_the_coupled_solver(monkeypatch):
     """As above, where every point is more than the condensed solver affords (its rule made to allow 100): the step
     that outgrows the candidates is solved again by the coupled solver, and so are the rest. The run still equals the
@@ -88,8 +108,9 @@ def test_the_candidates_with_a_compliant_layer_memory_and_a_load_at_t0():
 def test_the_trapezoid_rules_landing_steps_share_one_plain_operator(monkeypatch):
     """The trapezoid rule puts part of the memory into the step's operator, so a run meets one per step size: t = 0's
     (K_A), its own (k = 0.1) and the landings' on the snapshots off the grid (0.2 to 0.25 to 0.3: two steps of 0.05,
-    which differ in their last bits and share one operator). The factorization keeps the candidates for the run's
-    own operator alone; the others' steps are the coupled solver's on a plain factor until one has served
+    which differ in their last bits and share one operator). Where the relaxation tensor is no multiple of A (its
+    Poisson ratio 0.25 against A's 0.3), each has a factor of its own, and the factorization keeps the candidates
+    for the run's own operator alone; the others' steps are the coupled solver's on a plain factor until one has served
     ``RENT_STEPS`` steps (made 3 here: the landings' third step of four), when its factorization is made again
     keeping them. Against the condensed solver, to the coupled solver's tolerance (1e-7 of the pressures). Before,
     the run factored four operators, each keeping the candidates."""
@@ -99,7 +120,7 @@ def test_the_trapezoid_rules_landing_steps_share_one_plain_operator(monkeypatch)
     monkeypatch.setattr(Candidates, "operator", lambda self, solver, again=False: requests.append(again) or
                         operator(self, solver, again))
     monkeypatch.setattr(StepOperators, "RENT_STEPS", 3)
-    kw = dict(h_contact=0.01, k=0.1, memory_rule="trapezoid", prony=[[-300.0, 0.3, 0.5]], progress=False)
+    kw = dict(h_contact=0.01, k=0.1, memory_rule="trapezoid", prony=[[-300.0, 0.25, 0.5]], progress=False)
     auto = workbench.run("memory_hertz3d", **kw)
     assert auto.attrs["contact_candidates"] > 0 and auto.attrs["contact_candidates_missed"] == 0
     assert [keep for _, keep in built] == [False, True, False] and built[0][0] == (0.0,)
@@ -107,6 +128,32 @@ def test_the_trapezoid_rules_landing_steps_share_one_plain_operator(monkeypatch)
     # (the coupled solver's conjugate gradients: in the landings' first two steps alone)
     assert np.allclose(auto.time.values[auto.linear_iterations.values > 0], [0.25, 0.3], rtol=0, atol=1e-12)
     _agree(auto, workbench.run("memory_hertz3d", contact_solver="condensed", **kw), tol=1e-7)
+
+
+def test_a_relaxation_tensor_that_is_a_multiple_of_A_shares_one_factor_for_every_step_size(monkeypatch):
+    """With C = f A (the Poisson ratio of A), the trapezoid rule's operators K_A + w K_C are (1 + w f) K_A: K_A's one
+    factorization, keeping the candidates, serves every one (``SharedFactor.of_memory``). The run of the test above
+    meets three operators, and one under error control (``rtol = 1e-3``) more: each asks for the candidates once,
+    none is made again, every step is theirs (no conjugate gradient iteration), one factorization in all. Equal to
+    1e-9 to the condensed solver with a factor per operator (both solve the inequality densely; with a factor per
+    operator the auto run's landings would be the coupled solver's, to its tolerance)."""
+    from workbench.schemes import step_operators
+
+    made, requests = [], []
+    Factor, operator = pardiso.Factor, Candidates.operator
+    monkeypatch.setattr(pardiso, "Factor", lambda *args, **kwargs: made.append(1) or Factor(*args, **kwargs))
+    monkeypatch.setattr(Candidates, "operator", lambda self, solver, again=False: requests.append(again) or
+                        operator(self, solver, again))
+    kw = dict(h_contact=0.01, k=0.1, memory_rule="trapezoid", prony=[[-300.0, 0.3, 0.5]], progress=False)
+    for extra, operators in ((dict(), 3), (dict(rtol=1e-3, T=0.6), 5)):
+        made.clear(), requests.clear()
+        auto = workbench.run("memory_hertz3d", **kw, **extra)
+        assert auto.attrs["contact_candidates"] > 0 and auto.attrs["contact_candidates_missed"] == 0
+        assert len(made) == 1 and len(requests) >= operators and not any(requests)
+        assert not auto.linear_iterations.values.any()
+        with monkeypatch.context() as own:
+            own.setattr(step_operators.SharedFactor, "of_memory", classmethod(lambda cls, d, method, trapezoid: None))
+            _agree(auto, workbench.run("memory_hertz3d", contact_solver="condensed", **kw, **extra))
 
 
 def test_a_run_of_many_steps_affords_more_candidates():

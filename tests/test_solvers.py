@@ -251,19 +251,21 @@ def test_the_free_block_is_scipys_cut():
 
 
 @pytest.mark.parametrize("name, kw", [("block", dict(scheme="bdf2", h=0.1, T=0.03, k=0.01)),
-                                      ("memory_slab", dict(h=0.1, T=0.2, k=0.1, memory_rule="trapezoid")),
                                       ("memory_slab", dict(h=0.1, T=0.2, k=0.1, memory_rule="trapezoid",
-                                                           contact_solver="coupled"))],
+                                                           prony=[[-1000.0, 0.2, 0.5]])),
+                                      ("memory_slab", dict(h=0.1, T=0.2, k=0.1, memory_rule="trapezoid",
+                                                           prony=[[-1000.0, 0.2, 0.5]], contact_solver="coupled"))],
                          ids=["bdf2", "vi", "vi, coupled"])
 def test_a_scheme_frees_the_factor_it_drops_before_it_factors_the_next(monkeypatch, name, kw):
-    """Where a factored operator is large, a scheme holds only as many as fit FACTOR_BYTES together (factors_kept),
-    and drops the least recently used one, with its own references to it, before it factors the next: BDF2 factors
-    its backward-Euler start and then its own operator, Model B's vi (trapezoid rule) the operator of u(0) and then the
-    steps'. With one kept, no earlier factor is alive when the next is made (measured: BDF2 on the P2 block at 271k
-    dofs peaked at 5.67 GB holding both, 3.36 GB now); with the default cache one is. The coupled solver's remembered
-    products hold their operator weakly, so they keep no dropped factor alive. The results are the same. A finished
-    run frees its factors as it returns (a cycle through the scheme kept them until the garbage collector ran: a
-    session's next run of memory_hertz3d at 47k dofs peaked at 1219 MB against 873 MB)."""
+    """Where a factored operator is large, a scheme holds only as many as fit FACTOR_BYTES together (factors_kept), and
+    drops the least recently used one, with its own references to it, before it factors the next: BDF2 factors its
+    backward-Euler start and then its own operator, Model B's vi (trapezoid rule) the operator of u(0) and then the
+    steps' (its relaxation tensor no multiple of A, whose operators would share one factor). With one kept, no
+    earlier factor is alive when the next is made (measured: BDF2 on the P2 block at 271k dofs peaked at 5.67 GB
+    holding both, 3.36 GB now); with the default cache one is. The coupled solver's remembered products hold their
+    operator weakly, so they keep no dropped factor alive. The results are the same. A finished run frees its
+    factors as it returns (a cycle through the scheme kept them until the garbage collector ran: a session's next
+    run of memory_hertz3d at 47k dofs peaked at 1219 MB against 873 MB)."""
     import weakref
 
     made, alive_at = [], []

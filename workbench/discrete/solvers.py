@@ -330,6 +330,11 @@ class SplitSolve:
         """The solve in parts of c K (this one's K) with the same factor."""
         return SplitSolve(self.solver, self.C, c)
 
+    def holds(self) -> bool:
+        """Whether the solver's factor still keeps C last (a factor shared by several operators may have been made
+        again keeping more dofs since: :class:`Scaled`)."""
+        return self.solver._kept is not None and np.array_equal(self.solver._kept, self.C)
+
     def free_displacement(self, rhs: np.ndarray) -> np.ndarray:
         """u_C for the load ``rhs`` (a dof vector) with nothing acting at C, S_C^-1 y_C / c, in C's order."""
         s = self.solver

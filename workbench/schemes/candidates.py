@@ -143,6 +143,12 @@ class Candidates:
         the operator's factorization is made again keeping every point, and the step solved on them."""
         if self.missed:
             return None
+        if not operator[2].holds():  # (its factor, shared, made again keeping every point for another operator)
+            grown = self._keep(operator[5], np.arange(self.nodes.size), again=True)
+            if grown is None:
+                self.missed = True
+                return None
+            operator[:] = grown
         P, stiffness, split, rho, compliance, solver = operator
         nodes, Q = self.nodes, np.setdiff1d(np.arange(self.nodes.size), P)
         sub = nodes.subset(P)

@@ -80,7 +80,7 @@ from .candidates import Candidates
 from .contact_nodes import ContactNodes
 from .coupled_contact import CoupledActiveSet, condensed_up_to
 from .memory_rules import rule_for
-from .step_operators import StepOperator, StepOperators
+from .step_operators import SharedFactor, StepOperator, StepOperators
 
 
 @dataclass
@@ -134,13 +134,13 @@ class MemoryVI(ErrorControlled, Scheme):
         # (the run's own operator, its step's: none under error control with the trapezoid, which changes each step)
         own = None if d.numerics.adaptive and any(self._weights_of(1.0)) else self._weights_of(d.numerics.k)
         own = None if own is None else StepOperators.key(own)
-        self.operators = StepOperators(self.cache_size, own, self.candidates)
+        self.shared = SharedFactor.of_memory(d, self.method, self.trapezoid)  # (C_i = f_i A: one factor of K_A)
+        self.operators = StepOperators(self.cache_size, own, self.candidates, self.shared is not None)
         self._use(0.0)
         self.z = np.zeros(d.ndof)
         self.rhs = d.u.vec.CreateVector()
         self.rhs_np = self.rhs.FV().NumPy()
-        self.tmp = d.u.vec.CreateVector()
-        self.work = d.u.vec.CreateVector()  # matvec results (allocated once, not per step)
+        self.tmp, self.work = d.u.vec.CreateVector(), d.u.vec.CreateVector()  # (the clamp's lift, M times it)
         self.u_prev = d.u.vec.FV().NumPy().copy()
         self.diag = {}
 
@@ -173,7 +173,7 @@ class MemoryVI(ErrorControlled, Scheme):
         factorization keeps the contact candidates where ``keep``."""
         d, x, nodes = self.d, self.exchange, self.nodes
         M = self.memory.operator(weights) if self.memory is not None else d.elastic.mat
-        solver = d.step_factor(M)
+        solver = d.step_factor(M) if self.shared is None else self.shared.solver(weights)
         schur = S_inv = rho = None
         if self.coupled is not None:
             diagonal = x.diagonal(M)

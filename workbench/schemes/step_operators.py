@@ -24,6 +24,8 @@ from __future__ import annotations
 from collections import Counter, OrderedDict
 from dataclasses import dataclass
 
+import numpy as np
+
 from ..discrete import solvers
 from .base import make_room
 
@@ -129,9 +131,14 @@ class StepOperators:
 
 
 class SharedFactor:
-    """One factor of K_G for every step operator of a Kelvin-Voigt body with A = tau G: a0 K_A + K_G = (a0 tau + 1)
-    K_G, so the operator of any a0 is a multiple of K_G and its solve K_G's scaled (:class:`solvers.Scaled`). The
-    operators a run meets (BDF2's start, the landings, one per step size under error control) then cost one
+    """One factor of a matrix K for step operators that are all multiples of it, c K, each solved by K's solve scaled
+    (:class:`solvers.Scaled`):
+
+    * Model A, a Kelvin-Voigt body with A = tau G: a0 K_A + K_G = (a0 tau + 1) K_G (:meth:`of`);
+    * Model B with the trapezoid rule and relaxation tensors C_i = f_i A: K_A + sum_i w_i K_Ci = (1 + sum_i w_i f_i)
+      K_A (:meth:`of_memory`).
+
+    The operators a run meets (BDF2's start, the landings, one per step size under error control) then cost one
     factorization. What that factorization gives about the contact dofs is scaled as well: the condensed solver's
     stiffness and solve in parts, and the contact candidates' (a factorization that keeps them last, made once:
     every operator keeps them then, also under error control). Not for an iterative solver or several processes.
@@ -140,26 +147,40 @@ class SharedFactor:
     >>> from workbench.discrete import discretisation
     >>> from workbench.schemes.implicit_euler import ImplicitEuler
     >>> d = discretisation.build(workbench.scene("hertz3d", h_contact=0.05, contact_solver="coupled"))
-    >>> shared = ImplicitEuler(d).shared
-    >>> round(shared.tau, 12), shared.solver(50.0).c  # (A = tau G, tau = 0.05: a0 = 50 is 3.5 K_G)
-    (0.05, 3.5)
+    >>> ImplicitEuler(d).shared.solver(50.0).c  # (A = tau G, tau = 0.05: a0 = 50 is 3.5 K_G)
+    3.5
     """
 
-    def __init__(self, d, tau: float):
-        self.d, self.tau, self.factor = d, tau, None
-        self.found = {}  # (what K_G's factorization gave about the contact dofs: solvers.Scaled)
+    def __init__(self, d, matrix, scale):
+        self.d, self.matrix, self.scale, self.factor = d, matrix, scale, None
+        self.found = {}  # (what K's factorization gave about the contact dofs: solvers.Scaled)
+
+    @staticmethod
+    def _affords(d, method: str) -> bool:
+        return d.world.size == 1 and method not in ("cg", "mixed")
 
     @classmethod
     def of(cls, d, method: str):
-        """The shared factor of an implicit Model A scheme on ``d`` with the linear solver ``method``, or None where A
-        is not a multiple of G, the solver is iterative or the run has several processes."""
+        """The shared factor of an implicit Model A scheme on ``d`` with the linear solver ``method`` (K_G; the key of
+        an operator is its a0), or None where A is not a multiple of G, the solver is iterative or the run has
+        several processes."""
         tau = d.model.viscous.multiple_of(d.model.elastic)
-        if tau is None or d.world.size != 1 or method in ("cg", "mixed"):
+        if tau is None or not cls._affords(d, method):
             return None
-        return cls(d, tau)
+        return cls(d, d.elastic.mat, lambda a0: a0 * tau + 1.0)
 
-    def solver(self, a0: float) -> solvers.Scaled:
-        """The solver of a0 K_A + K_G (K_G factored at the first call that needs it)."""
+    @classmethod
+    def of_memory(cls, d, method: str, trapezoid: bool):
+        """The shared factor of Model B's ``trapezoid`` rule on ``d`` (K_A; the key of an operator is its tuple of
+        the memory terms' weights w_i), or None where a relaxation tensor is not a multiple of A (or as :meth:`of`).
+        The rectangle rule's operator is K_A alone."""
+        factors = [C.multiple_of(d.model.elastic) for _, C, _ in d.memory] if d.memory else [None]
+        if not trapezoid or None in factors or not cls._affords(d, method):
+            return None
+        return cls(d, d.elastic.mat, lambda weights: 1.0 + float(np.dot(weights, factors)))
+
+    def solver(self, key) -> solvers.Scaled:
+        """The solver of the operator of ``key`` (K factored at the first call that needs it)."""
         if self.factor is None:
-            self.factor = self.d.step_factor(self.d.elastic.mat)
-        return solvers.Scaled(self.factor, a0 * self.tau + 1.0, self.found)
+            self.factor = self.d.step_factor(self.matrix)
+        return solvers.Scaled(self.factor, self.scale(key), self.found)
