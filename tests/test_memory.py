@@ -179,6 +179,27 @@ def test_bad_model_b_input(overrides, message):
     assert message in str(err.value)
 
 
+def test_trapezoid_steps_that_make_the_operator_indefinite_are_refused(monkeypatch):
+    """A Prony term that takes three times A's stiffness away (memory_slab: E = 1000, a term of -3000 with A's
+    Poisson ratio, tau = 0.5): the trapezoid rule's step operator is (1 - 3 w(k)) K_A, w(k) = tau (1 - (1 - e^-x)/x),
+    x = k / tau, definite for k below 1.41 s (x = 2.82, the root of (1 - e^-x)/x = 1/3). Steps up to 1.3 s run; 1.5 s
+    is refused before any work, naming k, or k_max under error control, and the longest step allowed. The bound is
+    the factorization's own: with the check taken out, a step of 1.5 s fails in the factorization (indefinite). The
+    rectangle rule (operator K_A) takes any step."""
+    from workbench.running import preflight
+
+    kw = dict(h=0.2, memory_rule="trapezoid", prony=[[-3000.0, 0.3, 0.5]], T=3.0, snapshots=(), progress=False)
+    assert workbench.run("memory_slab", k=1.3, **kw).attrs["status"] == "complete"
+    for extra, name in ((dict(k=1.5), "k = 1.5"), (dict(rtol=1e-3, k_max=1.5), "k_max = 1.5")):
+        with pytest.raises(ParameterError) as err:
+            workbench.run("memory_slab", **kw, **extra)
+        assert str(err.value).startswith(name) and "steps below 1.4 s" in str(err.value), str(err.value)
+    assert workbench.run("memory_slab", **(kw | dict(memory_rule="rectangle", k=1.5))).attrs["status"] == "complete"
+    monkeypatch.setattr(preflight, "trapezoid_steps", lambda *args: None)
+    with pytest.raises(Exception, match="positive definite|not positive|singular"):
+        workbench.run("memory_slab", k=1.5, **kw)
+
+
 def test_block_3d_regimes():
     """memory_block (3D, coarse): all contact regimes at T, u_nu <= gap, complementarity at round-off."""
     ds = workbench.run("memory_block", h=0.125, k=0.05, progress=False)

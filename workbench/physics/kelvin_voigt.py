@@ -127,6 +127,9 @@ class Scalar:
     def out_of_plane(self, strain: np.ndarray) -> np.ndarray:
         return np.zeros(strain.shape[:-1])
 
+    def voigt(self, dim: int = 1) -> np.ndarray:
+        return np.array([[self.modulus]])
+
 
 class Voigt:
     """A user-supplied linear tensor: stress_v = C strain_v in Voigt notation (see the module docs)."""

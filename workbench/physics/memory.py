@@ -40,6 +40,15 @@ class Prony:
         """exp(-k / tau_i): the one-step factors of the histories."""
         return [float(np.exp(-k / tau)) for _, tau in self.terms]
 
+    @property
+    def tensors(self) -> list:
+        return [C for C, _ in self.terms]
+
+    def trapezoid_weights(self, k: float) -> list:
+        """Per term, the weight of u_n in the memory of a step of length k with u linear over the step:
+        tau_i (1 - (1 - e^(-x)) / x), x = k / tau_i (k / 2 for k << tau_i, tau_i for k >> tau_i)."""
+        return [tau * (1.0 - (-np.expm1(-k / tau)) / (k / tau)) if k > 0.0 else 0.0 for _, tau in self.terms]
+
 
 class GeneralKernel:
     """B(t) = b(t) C with b an expression in t (O(n) quadrature per step)."""
@@ -49,6 +58,14 @@ class GeneralKernel:
 
     def __init__(self, shape, tensor):
         self.shape, self.tensor = shape, tensor
+
+    @property
+    def tensors(self) -> list:
+        return [self.tensor]
+
+    def trapezoid_weights(self, k: float) -> list:
+        """The weight of u_n in the product trapezoid rule's memory of a step of length k: k/2 b(0)."""
+        return [0.5 * k * float(self.shape(t=0.0))]
 
     def weights(self, times: np.ndarray, trapezoid: bool = False) -> np.ndarray:
         """The weights w_j (j < n) of M_n = sum_j w_j u_j on the grid t_0 .. t_n.

@@ -19,6 +19,8 @@ from __future__ import annotations
 import math
 from dataclasses import dataclass
 
+import numpy as np
+
 from ..discrete import pardiso
 from ..errors import ParameterError
 from ..input.numerics import may_iterate
@@ -88,6 +90,56 @@ def resources(scene, model, n_steps: int, processes: int = 1) -> None:
                              f"more than the {free / 2**30:.3g} GB this machine has free: use a larger h or a lower "
                              "order" + ("" if not iterative or scene["solver"] == "cg" else
                                         ", or solver = 'cg' (no factor)"))
+
+
+def refusals(scene, model, numerics, grid, times, processes: int = 1) -> None:
+    """Every refusal of a run's inputs that needs its model and its grid, before any work: :func:`resources` and
+    :func:`trapezoid_steps` (the longest step: the grid's, set by k or by ``times`` where given; k_max under error
+    control)."""
+    resources(scene, model, len(grid) - 1, processes=processes)
+    longest = (numerics.largest_step, "k_max") if numerics.adaptive else \
+        (float(np.max(np.diff(grid))), "k" if times is None else "times")
+    trapezoid_steps(scene, model, *longest)
+
+
+def trapezoid_steps(scene, model, k_max: float, name: str) -> None:
+    """Refuse, before any work, steps up to ``k_max`` (the parameter ``name`` sets them) that Model B's trapezoid
+    rule cannot take. Its step operator is K_A + sum_i w_i(k) K_Ci, w_i(k) the weight of u_n in term i's memory
+    (growing with k: k/2 for a short step, tau_i for a long one). Where the relaxation tensors C_i take stiffness away
+    (a negative Prony modulus), a long step leaves the tensor A + sum_i w_i C_i, and the operator, indefinite: the
+    step's inequality then has no unique solution, and its factorization fails. The rectangle rule's operator is
+    K_A alone.
+
+    >>> import workbench
+    >>> sc = workbench.scene("memory_rod", memory_rule="trapezoid", prony=[[-3.0, 0.5]])  # (a = 1: 1 - 3 w(k))
+    >>> trapezoid_steps(sc, sc.model_of(), 0.1, "k")  # (w = 0.047: 1 - 3 w > 0; it is 0 at k = 1.41)
+    >>> try:
+    ...     trapezoid_steps(sc, sc.model_of(), 5.0, "k")
+    ... except workbench.ParameterError as err:
+    ...     print(str(err).split("; ")[-1])
+    allowed: steps below 1.4 s, or memory_rule = 'rectangle'
+    """
+    memory = model.memory if scene.values.get("memory_rule") == "trapezoid" else None
+    if memory is None:
+        return
+    dim = model.geometry.dim
+    A, tensors = model.elastic.voigt(dim), [C.voigt(dim) for C in memory.tensors]
+    scale = float(np.abs(A).max())
+
+    def least(k: float) -> float:
+        T = A + sum(w * C for w, C in zip(memory.trapezoid_weights(k), tensors))
+        return float(np.linalg.eigvalsh(T).min())
+
+    if least(k_max) > 1e-9 * scale:
+        return
+    low, high = 0.0, k_max  # (the longest step that keeps it definite: A alone is, at k = 0)
+    for _ in range(60):
+        mid = 0.5 * (low + high)
+        low, high = (mid, high) if least(mid) > 1e-9 * scale else (low, mid)
+    raise ParameterError(f"{name} = {k_max:g}: with memory_rule = 'trapezoid' a step this long makes the step's "
+                         f"operator indefinite (A + sum_i w_i(k) C_i, the memory's share of u_n in it, has the "
+                         f"eigenvalue {least(k_max):.3g}); allowed: steps below {low:.2g} s, or "
+                         "memory_rule = 'rectangle'")
 
 
 #: Presets that keep the paper's P1 elements on purpose (documented in docs/choices.md).

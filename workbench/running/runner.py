@@ -100,7 +100,7 @@ def run(scene=None, *, restart=None, checkpoint=None, progress=None, record_time
     model = _on_archived_mesh(model or sc.model_of(), resume)
     world = parallel.world()
     parallel.check(sc, model, numerics)
-    preflight.resources(sc, model, len(grid) - 1, processes=world.size)
+    preflight.refusals(sc, model, numerics, grid, times, processes=world.size)
     call = _call(scene, dict(restart=restart, checkpoint=checkpoint), overrides,
                  dict(record_times=record_times, times=times, limit=limit, threads=threads))
     job = functools.partial(_Run, sc, numerics=numerics, world=world, call=call, resume=resume, checkpoint=checkpoint,

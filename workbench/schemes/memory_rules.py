@@ -133,11 +133,7 @@ class PronyMemory(MemoryRule):
     def implicit_weights(self, k: float) -> list:
         if not self.trapezoid or k == 0.0:
             return [0.0] * len(self.d.memory)
-        out = []
-        for _, _, tau in self.d.memory:
-            x = k / tau
-            out.append(tau * (1.0 - (-np.expm1(-x)) / x))
-        return out
+        return self.d.model.memory.trapezoid_weights(k)
 
     def advance(self, t_prev, t_next, u_prev, out, weights):
         k = t_next - t_prev
@@ -185,7 +181,7 @@ class QuadratureMemory(MemoryRule):
     def implicit_weights(self, k: float) -> list:
         if not self.trapezoid or k == 0.0:
             return [0.0] * len(self.d.memory)
-        return [0.5 * k * float(self.kernel.shape(t=0.0))]
+        return self.kernel.trapezoid_weights(k)
 
     def advance(self, t_prev, t_next, u_prev, out, weights):
         out[:] = 0.0
