@@ -6,6 +6,8 @@ operator, on the Hertz hemisphere under error control.
 
 ``hertz3d`` derives its viscosity from its elasticity (A = tau G), so each implicit step operator a0 K_A + K_G is
 (a0 tau + 1) K_G. Under error control every step size has its own a0, and before ``SharedFactor`` each was factored.
+With the shared factor the contact candidates are kept once for every operator, so error control takes them too
+(docs/schemes.md, "One factor for a body with A = tau G"); "own" runs the coupled solver on the whole side.
 Each run is a process of its own, one thread; the two variants alternate (the first of each repetition swaps), and
 "own" disables ``SharedFactor.of``. Per run: the factorizations (calls of ``solvers.factor``), the steps, the run's
 wall time, and u and the pressures against the other variant of the same repetition. Writes ``shared_factor.csv``.
