@@ -95,7 +95,8 @@ class Solver:
 
 class Scaled(Solver):
     """The solver of c K from a direct ``solver`` of K: one factor serves every multiple of K (a Kelvin-Voigt body
-    with A = tau G, whose step operators a0 K_A + K_G are (a0 tau + 1) K_G).
+    with A = tau G, whose step operators a0 K_A + K_G are (a0 tau + 1) K_G; Model B's trapezoid rule with relaxation
+    tensors that are multiples of A).
 
     What the base's factorization gives about the contact dofs (their condensed stiffness, the solve in parts around
     them) is scaled too: c S and the parts of c K's solve. ``found`` holds it for every multiple of one base (give each

@@ -55,8 +55,8 @@ class ImplicitEuler(ErrorControlled, KelvinVoigtScheme):
     (a0, h_n) from :meth:`coefficients` (backward Euler: a0 = 1/k, h_n = -u_{n-1}/k;
     :class:`~workbench.schemes.bdf2.BDF2` overrides them), so that v_n = a0 u_n + h_n.
     The matrix a0 K_A + K_G is factored and condensed once per distinct a0 (a small cache,
-    so that an adaptive run that returns to a step size reuses it); where A = tau G and the
-    steps only solve with it, K_G's one factor serves every a0
+    so that an adaptive run that returns to a step size reuses it); where A = tau G, K_G's one
+    factor, with its condensed stiffness and the candidates it keeps, serves every a0
     (:class:`~workbench.schemes.step_operators.SharedFactor`).
     """
 
