@@ -105,8 +105,21 @@ def test_checkpoints_are_written_during_the_run_and_continue_it(tmp_path):
     assert np.isclose(float(cp.time[-1]), 0.14) and cp.sizes["snapshot"] == 1  # the snapshot at 0.1 s
     ds = workbench.run("tp5", restart=path, checkpoint=path, checkpoint_every=7, progress=False, **values)
     assert_same_run(ds, straight)
-    with pytest.raises(workbench.ParameterError, match="checkpoint_every = 7 needs a file"):
+    with pytest.raises(workbench.ParameterError, match="^checkpoint_every = 7 needs a file"):
         workbench.run("tp5", checkpoint_every=7, progress=False, **values)
+
+
+def test_a_checkpoint_continued_without_a_file_says_the_value_is_the_archives(tmp_path):
+    """A checkpoint continued as the docs show, ``workbench.run(restart=PATH)``, inherits the archive's
+    checkpoint_every: the refusal names it as the archive's and says how to go on (the archive's path, or
+    checkpoint_every=0, which continues without checkpoints to the straight run's numbers)."""
+    values = dict(h=0.1, k=0.01, T=0.1, scheme="bdf2")
+    path = tmp_path / "run.nc"
+    straight = workbench.run("tp5", checkpoint=path, checkpoint_every=4, progress=False, **values)
+    refusal = r"^the archive's checkpoint_every = 4 needs a file.*checkpoint=PATH; the archive's own path.*= 0 to"
+    with pytest.raises(workbench.ParameterError, match=refusal):
+        workbench.run(restart=path, progress=False)
+    assert_same_run(workbench.run(restart=path, checkpoint_every=0, progress=False), straight)
 
 
 def test_a_continuation_records_at_the_record_times_its_archive_was_given(tmp_path):

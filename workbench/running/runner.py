@@ -94,7 +94,7 @@ def run(scene=None, *, restart=None, checkpoint=None, progress=None, record_time
     _check_options(overrides, checkpoint, limit, threads, progress)
     _check_objects(record_times=record_times, times=times, model=model, restart=restart)
     sc, resume = _scene_and_archive(scene, restart, overrides, model)
-    _check_checkpoint(sc, checkpoint)
+    _check_checkpoint(sc, checkpoint, inherited=restart is not None and "checkpoint_every" not in overrides)
     numerics = numerics_of.from_scene(sc, threads)
     grid, sync, record_times = _grid(sc, numerics, times, record_times, resume)
     model = _on_archived_mesh(model or sc.model_of(), resume)
@@ -128,10 +128,15 @@ def _once(job, model, numerics, execute_args):
     return job(model).execute(*execute_args)
 
 
-def _check_checkpoint(sc, checkpoint) -> None:
+def _check_checkpoint(sc, checkpoint, inherited: bool = False) -> None:
+    """Checkpoints need a file; where the value is the continued archive's (``inherited``: the caller did not give
+    it), the message says so and how to continue without them."""
     if sc["checkpoint_every"] and checkpoint is None:
-        raise ParameterError(f"checkpoint_every = {sc['checkpoint_every']} needs a file to write the checkpoints to: "
-                             "give -o OUT.nc (workbench.run: checkpoint=PATH)")
+        whose = "the archive's " if inherited else ""
+        instead = ("; the archive's own path continues it in place), or checkpoint_every = 0 to continue without "
+                   "checkpoints") if inherited else ")"
+        raise ParameterError(f"{whose}checkpoint_every = {sc['checkpoint_every']} needs a file to write the "
+                             f"checkpoints to: give -o OUT.nc (workbench.run: checkpoint=PATH{instead}")
 
 
 def _check_options(overrides: dict, checkpoint, limit, threads, progress=None) -> None:
