@@ -44,10 +44,11 @@ BDF2 (five operators, 52 steps), before its operators shared one factor, that to
 (docs/schemes.md, "The candidates kept for the run's own operator").
 
 Measured with fixed steps on the hemisphere (``hertz3d`` at its defaults, 52 steps of backward Euler;
-``python studies/model_a_candidates.py``, docs/schemes.md, "Model A's implicit steps on candidate facets"): at 47k
-dofs 23.2 s against 49.0 s for the coupled solver on the whole side, at 106k 74.6 s against 140.0 s, at 193k (where
-the zone outgrows the candidates) 420 s against 487 s; equal to 4e-10 (a machine about twice as slow as the one that
-gave 13.4, 44.0 and 234 s against 37.9, 110.2 and 315 s).
+``python studies/model_a_candidates.py``, docs/schemes.md, "Model A's implicit steps on candidate facets"), one
+factorization of K_G serving both of the run's operators: at 47k dofs 19.5 s against 53.9 s for the coupled solver on
+the whole side, at 106k 54.9 s against 156.9 s, at 193k (where the zone outgrows the candidates in the last steps)
+219.4 s against 364.2 s; equal to 5e-10. With a factorization per operator (061b3ac) the same study gave 23.2 s
+against 49.0 s, 74.6 s against 140.0 s and 420 s against 487 s.
 """
 from __future__ import annotations
 
