@@ -32,9 +32,9 @@ from .base import make_room
 
 @dataclass
 class StepOperator:
-    """One factored operator: the matrix ``M``, its ``solver``, the contact solver ``newton`` on it, the solve in
-    parts around the contact dofs (``split``, the condensed solver's), and the candidates' operator (``kept``, None
-    where the factorization does not keep them)."""
+    """One factored operator: the matrix ``M`` (None where a shared factor serves it and nothing else needs it), its
+    ``solver``, the contact solver ``newton`` on it, the solve in parts around the contact dofs (``split``, the
+    condensed solver's), and the candidates' operator (``kept``, None where the factorization does not keep them)."""
 
     M: object
     solver: object
