@@ -76,6 +76,17 @@ class Exchange:
 
         return matrix_diagonal(mat)
 
+    _diagonals = None  # (K_A's and K_G's, as operator_diagonal gathered them)
+
+    def operator_diagonal(self, a0: float):
+        """The diagonal of Model A's step operator a0 K_A + K_G, as a vector of the view (None where the contact
+        problem is not solved), from K_A's and K_G's, gathered once (:meth:`diagonal` of each operator took 28 ms at
+        47k dofs, 57 times in an error-controlled run)."""
+        if self._diagonals is None:
+            self._diagonals = tuple(self.diagonal(m) for m in (self.d.viscous.mat, self.d.elastic.mat))
+        viscous, elastic = self._diagonals
+        return None if viscous is None else a0 * viscous + elastic
+
     def sync_beta(self) -> None:
         """The view's bonding field takes the body's (it is the body's here)."""
         return None

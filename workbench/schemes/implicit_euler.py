@@ -99,7 +99,6 @@ class ImplicitEuler(ErrorControlled, KelvinVoigtScheme):
         own = None if n.adaptive else StepOperators.key(self._constant_a0(n.k))
         self.operators = StepOperators(self.cache_size, own, self.candidates, self.shared is not None)
         self.M = self.newton = self.solver = self.split = self.kept = None  # (the step's, from _prepare)
-        self._diagonals = None  # (K_A's and K_G's diagonals: _diagonal)
         self.iterations = self.passes = self.inner = 0
         self.resolved = True
 
@@ -141,20 +140,11 @@ class ImplicitEuler(ErrorControlled, KelvinVoigtScheme):
             M = d.viscous.mat.CreateMatrix()
             M.AsVector().data = a0 * d.viscous.mat.AsVector() + d.elastic.mat.AsVector()
         solver = d.step_factor(M) if self.shared is None else self.shared.solver(a0)
-        diagonal = self._diagonal(a0) if self.coupled else None
+        diagonal = self.exchange.operator_diagonal(a0) if self.coupled else None  # (on every process: it gathers)
         newton = self.exchange.run(lambda: self._newton(solver, diagonal), solver) if self.contact else None
         split = solver.split(self.op.C) if self.op is not None and not self.coupled else None
         kept = self.candidates.operator(solver) if keep else None
         return StepOperator(M, solver, newton, split, kept)
-
-    def _diagonal(self, a0: float):
-        """The diagonal of a0 K_A + K_G (the coupled solver's preconditioner) from K_A's and K_G's, gathered once (on
-        every process, where the contact problem is solved; None elsewhere): an operator's own took 28 ms at 47k
-        dofs, 57 times in an error-controlled run."""
-        if self._diagonals is None:
-            self._diagonals = tuple(self.exchange.diagonal(m) for m in (self.d.viscous.mat, self.d.elastic.mat))
-        viscous, elastic = self._diagonals
-        return None if viscous is None else a0 * viscous + elastic
 
     def _newton(self, solver, diagonal=None):
         """The contact solver of the operator ``solver`` solves (where the contact problem is solved); ``diagonal``:
