@@ -351,3 +351,30 @@ def test_model_b_with_p2_elements():
     assert run.complementarity.max() < 1e-12 and run.attrs["status"] == "complete"
     with pytest.raises(ParameterError, match="order 1, or 2 on a 2D body"):
         workbench.scene("memory_block", order=2)
+
+
+def test_a_general_kernels_state_holds_the_stored_displacements_alone():
+    """The quadrature memory's state (restart state, and what a rejected step is redone from) holds u_0 ... u_{n-1}
+    for its n + 1 times and nothing more. It once copied the buffer's next row too, memory never written: NaN
+    patterns there made a rejected step's state compare unequal to itself at random, and went into the archives.
+    The buffer's unwritten rows are made NaN here, so that copy would show."""
+    from workbench.discrete import discretisation
+    from workbench.schemes import scheme_class
+
+    sc = workbench.scene("memory_rod", scheme="vi", kernel="exp(-t/0.2)*(1+t)", kernel_E=0.5, prony=())
+    d = discretisation.build(sc.model_of(), sc)
+    s = scheme_class("vi")(d)
+    s.preflight(0.05)
+    s.start(0.0)
+    s.accept(0.0)
+    s.memory.stored[:] = np.nan
+    before, t = [], 0.0
+    for k in (0.05, 0.05, 0.03):
+        before.append(d.u.vec.FV().NumPy().copy())
+        s.step(t, t + k)
+        t += k
+        s.accept(t)
+    extra = s.state()["extra"]
+    assert len(extra["times"]) == 4 and np.array_equal(extra["stored"], np.array(before))
+    s.restore(s.state())
+    assert np.array_equal(s.state()["extra"]["stored"], np.array(before))

@@ -212,16 +212,18 @@ class QuadratureMemory(MemoryRule):
         return [0.5 * k * (b(0.0) * u - b(k) * u1)]
 
     def state(self) -> dict:
-        n = len(self.times)
+        # (u_0 ... u_{n-1} for the n + 1 times: the buffer's next row is not yet written, and copying it put whatever
+        # memory held, NaN patterns among it, into the state and the archives)
+        n = len(self.times) - 1
         return super().state() | {"times": list(self.times), "stored": self.stored[:n].copy()}
 
     def restore(self, extra: dict) -> None:
         super().restore(extra)
         self.times = list(extra["times"])
-        n = len(self.times)
-        if self.stored.shape[0] < n:
+        n = len(self.times) - 1
+        if self.stored.shape[0] <= n:
             self.stored = np.empty((max(64, 2 * n), self.stored.shape[1]))
-        self.stored[:n] = extra["stored"]
+        self.stored[:n] = np.asarray(extra["stored"])[:n]  # (archives before the fix hold one row more)
 
 
 def rule_for(d, trapezoid: bool):
