@@ -1,7 +1,7 @@
 """Model A's implicit steps on the contact candidates against the coupled solver on the whole side, on the hemisphere.
 
     python studies/model_a_candidates.py [--out data/hertz] [--levels 0.005 0.0035] [--scheme implicit] [--repeat 1]
-        [--variants both|candidates]
+        [--variants both|candidates] [--cap B]
 
 ``hertz3d`` at its defaults (Kelvin-Voigt, normal compliance, backward Euler with k = 0.02 to T = 1: 52 steps, the
 load's kinks met by half steps), ``contact_solver = "auto"``, where ``auto`` takes the coupled solver (from 2500
@@ -17,8 +17,10 @@ into their compliance, once per step operator (a dense Cholesky factor and its i
 operator's sparse factorization), and ``per_step_marginal``, the loop less both over the steps: what one more step of
 a size already met costs. ``slope`` and ``slope_marginal``: per_step and per_step_marginal against the dofs in
 log-log, per variant, from the medians of the ``--repeat`` runs of each level (the levels alternate, so the
-machine's drift falls on all of them). ``--variants candidates`` leaves out the coupled solver alone. Writes
-``model_a_candidates.csv`` (about 6 minutes at the default levels).
+machine's drift falls on all of them). ``--variants candidates`` leaves out the coupled solver alone. ``--cap B``:
+at most B back-substitutions' worth of candidates instead of the package's 4 (``Candidates.backsubs``; docs/schemes.md,
+"More candidates for runs of many steps", measured B = 8), written to ``model_a_candidates_capB.csv``. Writes
+``model_a_candidates.csv`` (about 6 minutes at the default levels; 16 at the three levels with both variants).
 """
 from __future__ import annotations
 
@@ -40,7 +42,9 @@ from threadpoolctl import threadpool_limits
 import workbench
 from workbench.discrete import discretisation, pardiso
 from workbench.schemes.candidates import Candidates
-hc, variant, scheme, out = float(sys.argv[1]), sys.argv[2], sys.argv[3], sys.argv[4]
+hc, variant, scheme, out, cap = float(sys.argv[1]), sys.argv[2], sys.argv[3], sys.argv[4], sys.argv[5]
+if cap != "default":  # (--cap: more or fewer candidates for runs of many steps)
+    Candidates.backsubs = (Candidates.backsubs[0], float(cap))
 if variant != "candidates":
     Candidates.most = classmethod(lambda cls, ndof, method, steps: 0)
 from workbench.discrete import condensation, solvers
@@ -77,16 +81,16 @@ print(json.dumps(dict(h_contact=hc, variant=variant, scheme=scheme, ndof=int(ds.
                       newton=int(ds.newton_iterations.sum()), inner=int(ds.linear_iterations.sum()),
                       run=round(run, 2), loop=round(loop, 2), factorizations=len(factoring),
                       factor_time=round(sum(factoring), 2), per_step=round((loop - sum(factoring)) / steps, 4),
-                      operator_dense=round(sum(dense), 2),
+                      operator_dense=round(sum(dense), 2), cap=Candidates.backsubs[1],
                       per_step_marginal=round((loop - sum(factoring) - sum(dense)) / steps, 4),
                       peak_mb=round(resource.getrusage(resource.RUSAGE_SELF).ru_maxrss / 1024.0))))
 """
 
 
-def one(hc: float, variant: str, scheme: str, out: str) -> dict:
+def one(hc: float, variant: str, scheme: str, out: str, cap=None) -> dict:
     env = dict(os.environ, OMP_NUM_THREADS="1", MKL_NUM_THREADS="1", OPENBLAS_NUM_THREADS="1")
-    done = subprocess.run([sys.executable, "-c", CHILD, str(hc), variant, scheme, out], capture_output=True,
-                          text=True, env=env, check=True)
+    args = [sys.executable, "-c", CHILD, str(hc), variant, scheme, out, "default" if cap is None else str(cap)]
+    done = subprocess.run(args, capture_output=True, text=True, env=env, check=True)
     return json.loads(done.stdout.strip().splitlines()[-1])
 
 
@@ -97,6 +101,8 @@ def main():
     p.add_argument("--scheme", default="implicit", choices=["implicit", "bdf2"])
     p.add_argument("--repeat", type=int, default=1, help="runs of each level and variant (the medians are fitted)")
     p.add_argument("--variants", default="both", choices=["both", "candidates"])
+    p.add_argument("--cap", type=float, default=None, help="the most back-substitutions' worth of candidates "
+                   "(Candidates.backsubs' upper bound; default the package's)")
     args = p.parse_args()
     variants = ("candidates", "coupled alone") if args.variants == "both" else ("candidates",)
     rows, first = [], {}
@@ -104,7 +110,7 @@ def main():
         for repeat in range(args.repeat):
             for hc in args.levels:
                 for variant in variants:
-                    row = one(hc, variant, args.scheme, f"{tmp}/u.npy")
+                    row = one(hc, variant, args.scheme, f"{tmp}/u.npy", args.cap)
                     u = np.load(f"{tmp}/u.npy")
                     first.setdefault(hc, u)
                     row["repeat"] = repeat
@@ -124,6 +130,7 @@ def main():
     out = Path(args.out)
     out.mkdir(parents=True, exist_ok=True)
     name = "model_a_candidates.csv" if args.scheme == "implicit" else f"model_a_candidates_{args.scheme}.csv"
+    name = name if args.cap is None else name.replace(".csv", f"_cap{args.cap:g}.csv")
     with open(out / name, "w", newline="") as fh:
         writer = csv.DictWriter(fh, fieldnames=list(dict.fromkeys(k for r in rows for k in r)))
         writer.writeheader()
