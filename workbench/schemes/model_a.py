@@ -18,6 +18,7 @@ from __future__ import annotations
 
 import numpy as np
 
+from ..discrete import solvers
 from ..physics.ops import NP
 from .base import Observer, Scheme, events
 
@@ -111,9 +112,24 @@ class KelvinVoigtObserver(Observer):
         """The pressure at held contact vertices: the support's reaction (K_A v + K_G u - f at their normal dofs)
         over their share of the side."""
         d = self.d
-        residual = self.gathered_record[0] if self.gathered_record is not None else self.record_vectors(t)[0]
-        force = residual[d.normal_dofs[pinned]]
+        dofs = d.normal_dofs[pinned]
+        force = self.gathered_record[0][dofs] if self.gathered_record is not None else self._residual_at(t, dofs)
         return -d.geometry.normal_sign * force / d.node_weights[pinned]
+
+    _rows = None  # (the held dofs, and K_A's and K_G's rows there: _residual_at)
+
+    def _residual_at(self, t: float, dofs: np.ndarray) -> np.ndarray:
+        """:meth:`record_vectors`' K_A v + K_G u - f at ``dofs`` alone, from the matrices' rows there, cut once: the
+        whole products cost 7.5 ms a record at 47k dofs (2.3 s of a 45 s error-controlled run recording every step),
+        for the held apex's one value."""
+        d, m = self.d, self.d.model
+        if self._rows is None or not np.array_equal(self._rows[0], dofs):
+            self._rows = (dofs.copy(), *(solvers.to_scipy(mat)[dofs] for mat in (d.viscous.mat, d.elastic.mat)))
+        _, viscous, elastic = self._rows
+        f = d.u.vec.CreateVector()
+        d.load_vector(t, f)
+        internal = sum((viscous if tensor is m.viscous else elastic) @ vector for tensor, vector in self.stress_parts())
+        return internal - f.FV().NumPy()[dofs]
 
     def record_vectors(self, t: float) -> list:
         """On a body that holds contact vertices: K_A v + K_G u - f, whose value at a held vertex is the support's
