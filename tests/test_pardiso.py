@@ -64,6 +64,43 @@ def test_a_factor_that_keeps_unknowns_last_gives_their_schur_complement_and_solv
 
 
 @needs_mkl
+def test_every_multiple_of_a_shared_factor_reads_one_stiffness_and_compliance_unformed():
+    """Scaled.kept for two multiples c of one factor: c S and S^-1 / c (S the Schur complement from dense algebra),
+    read through blocks, rows, products and the diagonal of the same two arrays, none formed per multiple; the dense
+    products (BLAS's symmetric one with the multiple as its alpha) and the springs' factor on a multiple equal those
+    on the matrix formed."""
+    from workbench.discrete.springs import SpringsFactor
+
+    A = _spd()
+    n, dense = A.shape[0], A.toarray()
+    keep = np.sort(np.random.default_rng(5).choice(np.arange(1, n), 30, replace=False))
+    o = np.setdiff1d(np.arange(1, n), keep)
+    S = dense[np.ix_(keep, keep)] - dense[np.ix_(keep, o)] @ np.linalg.solve(dense[np.ix_(o, o)],
+                                                                             dense[np.ix_(o, keep)])
+    base, found = solvers.PardisoCholesky(A, np.arange(1, n)), {}
+    (S2, G2, _), (S5, G5, _) = (solvers.Scaled(base, c, found).kept(keep) for c in (2.0, 5.0))
+    assert S2.base is S5.base and G2.base is G5.base  # (one stiffness and one compliance for every multiple)
+    x, rows = np.cos(np.arange(30.0)), np.array([3, 7, 11])
+    for c, Sc, Gc in ((2.0, S2, G2), (5.0, S5, G5)):
+        stiffness, compliance = c * S, np.linalg.inv(S) / c
+        for got, want in ((Sc, stiffness), (Gc, compliance)):
+            scale = np.abs(want).max()
+            assert np.abs(got @ x - want @ x).max() < 1e-10 * scale * np.abs(x).sum()
+            assert np.abs(got[np.ix_(rows, rows)] - want[np.ix_(rows, rows)]).max() < 1e-10 * scale
+            assert np.abs(got[rows] - want[rows]).max() < 1e-10 * scale
+            assert np.abs(got.diagonal() - want.diagonal()).max() < 1e-10 * scale
+        schur = condensation.DenseSchur(Sc, Gc)
+        assert np.abs(schur.apply(x) - compliance @ x).max() < 1e-10 * np.abs(compliance @ x).max()
+        J, R = sp.diags(np.linspace(1.0, 2.0, 20) * np.abs(stiffness).max()).tocsr(), np.arange(20)
+        r = np.sin(np.arange(20.0))
+        got = SpringsFactor(J, R, Gc, whole=True).solver()(r)
+        want = SpringsFactor(J, R, compliance, whole=True).solver()(r)
+        assert np.abs(got - want).max() < 1e-10 * np.abs(want).max()
+    with pytest.raises(TypeError, match="forming c A whole"):
+        np.asarray(S2)
+
+
+@needs_mkl
 def test_pardiso_condenses_inside_its_own_factorization_when_asked_first_and_splits_a_solve():
     """PardisoCholesky asked for the condensed stiffness before any solve keeps the contact dofs last: the stiffness
     equals the separate Schur complement (the route once the factor exists, which then has no split), and the split

@@ -20,6 +20,8 @@ import numpy as np
 import scipy.linalg as la
 import scipy.sparse as sp
 
+from .solvers import Multiple
+
 
 def _grown(A: np.ndarray, shape: tuple) -> np.ndarray:
     """A within an array of at least ``shape`` (twice the needed size along a grown axis, A's entries kept): the
@@ -166,7 +168,9 @@ class SpringsFactor:
 
     def __init__(self, J, R: np.ndarray, G: np.ndarray, U: np.ndarray | None = None, whole: bool = False):
         # (G is symmetric: where it is F-ordered, as LAPACK's inverse leaves it, its transpose is the same matrix in
-        # C order, which scipy's products with a sparse matrix read in place instead of copying all of it)
+        # C order, which scipy's products with a sparse matrix read in place instead of copying all of it. A multiple
+        # of a shared factor's compliance, solvers.Multiple, is read as its base, the multiple applied to what is cut)
+        G, self._scale = (G.base, G.c) if isinstance(G, Multiple) else (G, 1.0)
         self.G = G if G.flags.c_contiguous else G.T
         self.U, self.whole = (R if U is None else U).copy(), whole
         # (the position in U of each dof, -1 off U; with whole, over every dof, so that U may grow)
@@ -179,9 +183,9 @@ class SpringsFactor:
         # with A = I + J G_RR and B = J G_R,margin, so only A is factored and the margin costs no factor work
         self._J = J = J.tocsr()
         g = self._g(self._r)
-        A = J @ G[np.ix_(g, g)]
+        A = J @ self._cut(np.ix_(g, g))
         A[np.diag_indices_from(A)] += 1.0
-        self._B = J @ G[np.ix_(g, self._g(self._m))]
+        self._B = J @ self._cut(np.ix_(g, self._g(self._m)))
         # (A^T's factor, in place: A is C-ordered, so A^T is LAPACK's order and no further |R|^2 array is made)
         self.lu = la.lu_factor(A.T, overwrite_a=True, check_finite=False)
         self._update = LowRank(self.U.size)
@@ -197,6 +201,10 @@ class SpringsFactor:
         """G's rows for the dofs at positions ``at`` of U."""
         return self.U[at] if self.whole else at
 
+    def _cut(self, key) -> np.ndarray:
+        """A block of G (times the multiple given, where G was one)."""
+        return self.G[key] if self._scale == 1.0 else self._scale * self.G[key]
+
     def _lu(self, b: np.ndarray) -> np.ndarray:
         """M0^-1 b (a vector or columns on U): b off R as it is, and A x_R = b_R - B b_margin (A y = c from A^T's
         factor)."""
@@ -206,7 +214,8 @@ class SpringsFactor:
 
     def _rows(self, dJ, at=None) -> np.ndarray:
         """dJ G_UU for rows dJ on U's positions (CSR), at the positions ``at`` (default all)."""
-        in_G = sp.csr_matrix((dJ.data, self._g(dJ.indices), dJ.indptr), shape=(dJ.shape[0], self.G.shape[0]))
+        data = dJ.data if self._scale == 1.0 else self._scale * dJ.data  # (G's multiple, on the few rows' nonzeros)
+        in_G = sp.csr_matrix((data, self._g(dJ.indices), dJ.indptr), shape=(dJ.shape[0], self.G.shape[0]))
         if at is not None:
             return in_G @ self.G[:, self._g(at)]
         return (in_G @ self.G)[:, self.U] if self.whole else in_G @ self.G
@@ -232,7 +241,7 @@ class SpringsFactor:
         self.U = np.r_[self.U, N]
         self._pos[N] = at = n + np.arange(N.size)
         self._m = np.r_[self._m, at]
-        self._B = np.hstack([self._B, self._J @ self.G[np.ix_(self._g(self._r), N)]])
+        self._B = np.hstack([self._B, self._J @ self._cut(np.ix_(self._g(self._r), N))])
         self.J0 = _padded(self.J0, self.U.size)
         self._update.grow(N.size, self._rows)
 

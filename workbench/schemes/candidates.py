@@ -134,7 +134,7 @@ class Candidates:
             return None
         stiffness, compliance, split = found  # (the compliance: the active set's systems on the forces, ContactNodes)
         self.kept = max(self.kept, P.size)
-        return [P, stiffness, split, 100.0 / np.diag(stiffness), compliance, solver]  # (rho: the condensed solver's)
+        return [P, stiffness, split, 100.0 / stiffness.diagonal(), compliance, solver]  # (rho: the condensed solver's)
 
     def equilibrium(self, operator, rhs: np.ndarray, u: np.ndarray, time: float):
         """u (in place) for the load ``rhs`` with the inequality solved on the candidates; the active-set iterations,

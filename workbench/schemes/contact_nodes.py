@@ -223,7 +223,7 @@ class ContactNodes:
         """States of the condensed energy's minimiser by projected Gauss-Seidel (exact coordinate minimisation)."""
         w = self.w
         b = S @ s_free
-        diag = np.diag(S)
+        diag = S.diagonal()
         rho = w / diag  # coordinate i: minimise (S_ii / 2) s^2 - y S_ii s + w psi(s) over s <= g -> prox
         layer = self.layer
         s = np.minimum(self.distance(self.d.u.vec.FV().NumPy() if u is None else u), layer.g)
