@@ -434,6 +434,25 @@ def test_reproduce_of_a_diverging_run_exits_3(tmp_path):
     assert ds.attrs["status"] == "incomplete" and ds.sizes["time"] > 1
 
 
+@pytest.mark.parametrize("scene, values, name, steps", [
+    # a division by zero at a grid time (Python's floats raised ZeroDivisionError there: a traceback, nothing kept)
+    ("rod", dict(h=0.1, k=0.05, delta="0.01/(t-0.55)+0.01/0.55"), "delta = ", 11),
+    ("tp4", dict(h=0.1, k=0.01, point_force="(0, 0.01/(t-0.55)+0.01/0.55)"), "point_force = ", 55),
+    # NaN between the vertices only (at the traction's quadrature points): the implicit step's Newton met a NaN
+    # residual and said "try a smaller k"
+    ("tp4", dict(h=0.1, scheme="implicit", traction_top="(0, sqrt(abs(x-0.25)-0.04))"), "traction_top = ", 1),
+])
+def test_a_load_that_is_not_finite_at_a_step_stops_the_run_naming_it(scene, values, name, steps):
+    """The run stops as a diverged one (the steps before kept, marked incomplete) and the message leads with the
+    expression that is not finite at that time, not with the step size."""
+    with pytest.raises(workbench.Diverged) as err:
+        workbench.run(scene, progress=False, **values)
+    lead, _, after = str(err.value).partition(": no step can meet it")
+    assert name in lead and "is not finite at t = " in lead and after, err.value
+    ds = err.value.dataset
+    assert ds.attrs["status"] == "incomplete" and ds.sizes["time"] == steps and name in ds.attrs["failure"]
+
+
 # ------------------------------------------------------------------------------------------------------
 # item 11: damaged study cases and stale temporary files
 # ------------------------------------------------------------------------------------------------------

@@ -104,7 +104,14 @@ class Expression:
     def __call__(self, x=0.0, y=0.0, z=0.0, t=0.0):
         """Evaluate with NumPy (broadcasting); a float for a constant scalar."""
         env = _NUMPY_NAMESPACE | {"x": x, "y": y, "z": z, "t": t}
-        parts = [eval(code, env) for code in self._compiled]  # noqa: S307 (checked trees, no builtins)
+        try:
+            parts = [eval(code, env) for code in self._compiled]  # noqa: S307 (checked trees, no builtins)
+        except (ZeroDivisionError, OverflowError):
+            # (Python floats raise where NumPy's give inf or NaN, e.g. 1/(t - 0.5) at t = 0.5: evaluated again as
+            # NumPy's, the value is not finite and the run stops there as at any other, its steps kept)
+            env |= {name: np.float64(v) if np.ndim(v) == 0 else v for name, v in zip("xyzt", (x, y, z, t))}
+            with np.errstate(all="ignore"):
+                parts = [eval(code, env) for code in self._compiled]  # noqa: S307
         if len(parts) == 1:
             value = parts[0]
             return float(value) if np.ndim(value) == 0 else np.asarray(value, dtype=float)

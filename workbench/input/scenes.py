@@ -508,11 +508,25 @@ def _check_expressions(body, v):
             if extra:
                 raise ParameterError(f"in {key} = {_clip(expr.source)}: {extra[0]!r} is not a coordinate of a "
                                      f"{body.kind} (allowed: {', '.join(sorted(coordinates) + ['t'])})")
-    times = np.linspace(0.0, v["T"], 11)
     corners = np.array(np.meshgrid(*[[lo, 0.5 * (lo + hi), hi] for lo, hi in body.bbox], indexing="ij")
                        ).reshape(body.dim, -1)
-    coords = dict(zip("xyz", corners))
-    for key, expr in v.items():
+    found = not_finite(v, np.linspace(0.0, v["T"], 11), corners)
+    if found:
+        raise ParameterError(found)
+
+
+def not_finite(values: dict, times, points: np.ndarray) -> str:
+    """Which expression of a scene's ``values`` is not finite at one of ``times`` at one of ``points`` (dim x n
+    coordinates): a sentence naming it, or "" where each is finite there.
+
+    >>> from workbench.expressions import parse
+    >>> not_finite({"delta": parse("0.01/(t - 0.5)")}, [0.0, 0.5], np.zeros((1, 1)))
+    "delta = '0.01/(t - 0.5)' is not finite at t = 0.5"
+    """
+    from ..expressions import Expression
+
+    coords = dict(zip("xyz", points))
+    for key, expr in values.items():
         if not isinstance(expr, Expression):
             continue
         for t in times:
@@ -523,7 +537,8 @@ def _check_expressions(body, v):
                 value = np.array([np.nan])
             if not np.all(np.isfinite(value)):
                 where = f"t = {t:g}" + ("" if not expr.variables & {"x", "y", "z"} else " somewhere in the body")
-                raise ParameterError(f"{key} = {_clip(expr.source)} is not finite at {where}")
+                return f"{key} = {_clip(expr.source)} is not finite at {where}"
+    return ""
 
 
 def _clip(text: str, n: int = 60) -> str:

@@ -22,6 +22,7 @@ import numpy as np
 
 from .. import parallel
 from ..errors import Diverged, ParameterError
+from ..expressions import Expression
 from ..input import numerics as numerics_of
 from ..input import scenes
 from ..input.geometry import of_run
@@ -241,6 +242,26 @@ def _naming_extremes(sc):
         raise type(err)(f"{err} (values given that are extreme: {', '.join(extremes)})") from None
 
 
+def _blamed(err: Diverged, sc, disc) -> Diverged:
+    """``err``, its message led by the scene's expression that is not finite at the failing step's time, where one
+    is (on the body's vertices: 1/(t - 0.55) at t = 0.55, sqrt of a negative under part of a side). Else the message
+    blamed the step or the scheme ("try a smaller k") for a load that no step can meet."""
+    if err.time is None:
+        return err
+    points = disc.vertex_xyz.T if len(disc.vertex_xyz) else np.zeros((disc.dim, 1))
+    found = scenes.not_finite(sc.values, [err.time], points)
+    if not found and disc.world.size == 1:  # (a load NaN between the vertices only, at the quadrature points)
+        F = disc.u.vec.CreateVector()
+        disc.load_vector(err.time, F)
+        if not np.all(np.isfinite(F.FV().NumPy())):
+            given = [f"{k} = {scenes._clip(str(sc.values[k]))}" for k in sorted(sc.values)
+                     if isinstance(sc.values[k], Expression) and sc.values[k].variables & {"x", "y", "z"}]
+            found = f"the load is not finite at t = {err.time:g} ({'; '.join(given) or 'the loads given'})"
+    if found:
+        err.args = (f"{found}: no step can meet it ({err})",)
+    return err
+
+
 class _Resume:
     """A run continued from an archive: the archive, the state it holds, and where it was read from."""
 
@@ -359,7 +380,7 @@ class _Run:
                 march(disc, scheme, self.steps, self._observe(), progress=self.progress, limit=limit,
                       limit_origin=origin, resume=self.resume is not None, after_step=self._after_step())
             except Diverged as err:
-                failure = err
+                failure = _blamed(err, sc, disc)
         ds = None  # (several MPI processes: rank 0 holds the records)
         if self.world.root:
             status = "complete" if failure is None else "incomplete"
