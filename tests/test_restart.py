@@ -134,6 +134,31 @@ def test_a_continuation_records_at_the_record_times_its_archive_was_given(tmp_pa
     assert_same_run(ds, straight)
 
 
+@pytest.mark.parametrize("how", ["continued in place", "checkpoints"])
+def test_a_run_that_stops_leaves_the_state_it_went_on_from(tmp_path, capsys, how):
+    """``workbench run --restart OUT.nc -o OUT.nc`` (and a run writing checkpoints to OUT.nc) that diverges wrote its
+    incomplete archive over OUT.nc: an archive without a state, so the state it went on from (the last checkpoint)
+    was gone. Now the stopped run goes beside it (OUT.stopped.nc, incomplete) and OUT.nc still continues."""
+    from workbench import cli
+
+    out = tmp_path / "out.nc"
+    growing = ["run", "tp4", "--h", "0.1", "--k", "0.01", "--scheme", "implicit", "--no-progress",
+               "--set", "point_force=(0, exp(8*t))"]  # (beyond 10 x the body's extent at t = 0.34)
+    if how == "continued in place":
+        assert cli.main([*growing, "--T", "0.2", "-o", str(out)]) == 0
+        assert cli.main(["run", "--restart", str(out), "--T", "1", "-o", str(out), "--no-progress"]) == 3
+        last = 0.2
+    else:
+        assert cli.main([*growing, "--T", "1", "--set", "checkpoint_every=10", "-o", str(out)]) == 3
+        last = 0.3
+    said = capsys.readouterr().out
+    assert f"wrote {tmp_path / 'out.stopped.nc'} (incomplete" in said and f"{out} keeps the state" in said, said
+    kept, stopped = workbench.load(out), workbench.load(tmp_path / "out.stopped.nc")
+    assert has_state(kept) and float(kept.time[-1]) == pytest.approx(last)
+    assert stopped.attrs["status"] == "incomplete" and float(stopped.time[-1]) == pytest.approx(0.33)
+    assert workbench.run(restart=out, T=0.33, checkpoint_every=0, progress=False).attrs["status"] == "complete"
+
+
 KILL_RUN = ["run", "tp5", "--scheme", "bdf2", "--h", "0.05", "--k", "0.001", "--T", "1", "--no-progress",
             "--set", "checkpoint_every=25"]
 

@@ -384,6 +384,67 @@ def test_disk_full_at_the_end_keeps_the_result(tmp_path, monkeypatch, capsys):
     assert not list(full.iterdir()), f"left behind in the full folder: {list(full.iterdir())}"
 
 
+@pytest.mark.parametrize("command", ["run", "checkpoints", "study"])
+def test_an_output_folder_made_a_file_during_the_run_keeps_the_result(tmp_path, monkeypatch, capsys, command):
+    """The folder of ``-o`` removed and a file made in its place while the run goes on: the checks that refuse such
+    a path before a run (a ParameterError, exit 2) met it at the end and threw the result away. Now that is a failed
+    write like a full disk's: the run is kept in the temporary folder (exit 4, the message says where), a checkpoint
+    that cannot be written is a warning and the run goes on, and a study whose cases' folder went finishes without
+    them."""
+    import tempfile
+
+    from workbench import cli as cli_module
+    from workbench.output import results
+
+    monkeypatch.setenv("TMPDIR", str(tmp_path))
+    monkeypatch.setattr(tempfile, "tempdir", None)
+    folder = tmp_path / "out"
+    folder.mkdir()
+    real, calls = results.write, []
+
+    def write_then_break(ds, path):  # (the first write lands; the folder is then a file)
+        calls.append(path)
+        done = real(ds, path)
+        if len(calls) == 1:
+            broken = Path(path).parent
+            shutil.rmtree(broken)
+            broken.write_text("a file now")
+        return done
+
+    monkeypatch.setattr(results, "write", write_then_break)
+    if command == "run":  # (the run itself breaks the folder: its -o is written once, at the end)
+        from workbench.running import runner
+
+        real_run = runner.run
+
+        def run_then_break(*args, **kwargs):
+            ds = real_run(*args, **kwargs)
+            shutil.rmtree(folder)
+            folder.write_text("a file now")
+            return ds
+
+        monkeypatch.setattr(runner, "run", run_then_break)
+    argv = {"run": ["run", "tp1", *RUN_TINY, "-o", str(folder / "a.nc")],
+            "checkpoints": ["run", "tp1", *RUN_TINY, "--set", "checkpoint_every=5", "-o", str(folder / "a.nc")],
+            "study": ["study", "tp1", "--k", "0.1", "0.05", "--h", "0.1", "--reference", "ode", "--workers", "0",
+                      "--no-progress", "-o", str(tmp_path / "s.nc")]}[command]
+    if command == "study":
+        folder = tmp_path / "s.nc.cases"
+    code = cli_module.main(argv)  # (it shows warnings as "warning: ..." lines on stderr)
+    err = capsys.readouterr()
+    if command == "study":
+        assert code == 0 and "its cases were not kept" in err.out, err
+        assert f"warning: the case archive {folder}" in err.err and "the study goes on" in err.err, err
+        assert workbench.load(tmp_path / "s.nc").sizes["k"] == 2
+        return
+    assert code == 4 and "Traceback" not in err.err, err
+    kept = re.search(r"the result is kept in (\S+)$", err.err.strip()).group(1)
+    ds = workbench.load(kept)
+    assert ds.attrs["status"] == "complete" and ds.sizes["time"] == 21
+    if command == "checkpoints":
+        assert "could not be written at t = " in err.err and "the run goes on" in err.err, err
+
+
 #: A command line whose figure and VTK writes fail with a full disk (the archive, if any, is written).
 _FULL_AT_THE_END = """
 import errno, sys

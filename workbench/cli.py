@@ -238,6 +238,19 @@ def _status_line(ds) -> str:
             f"(setup {a['setup_time']:.3g} s), ndof {a['ndof']}")
 
 
+def _stopped_beside(args, ds) -> str:
+    """Where a run that stopped (diverged) writes what it computed: ``-o``, unless that file is the state this run
+    went on from or wrote its checkpoints to (``--restart`` the same file, or ``checkpoint_every``): an archive of a
+    stopped run holds no state to go on from, so it goes beside it, as ``NAME.stopped.nc``, and the state stays."""
+    from pathlib import Path
+
+    out = Path(args.output)
+    continued = args.restart is not None and Path(args.restart).exists() and out.exists() \
+        and out.resolve() == Path(args.restart).resolve()
+    checkpointed = int(ds.attrs.get("checkpoint_every", 0) or 0) > 0 and out.is_file()
+    return str(out.with_name(f"{out.stem}.stopped{out.suffix}")) if continued or checkpointed else args.output
+
+
 def cmd_run(args) -> int:
     from .errors import Diverged
 
@@ -270,9 +283,12 @@ def cmd_run(args) -> int:
     print(_status_line(ds))
     kept = None
     if args.output:
-        written, kept = _write_or_keep(ds, args.output)
+        target = _stopped_beside(args, ds) if code else args.output
+        written, kept = _write_or_keep(ds, target)
         if written == 0:
-            print(f"wrote {args.output}" + (" (incomplete: see attrs 'failure')" if code else ""))
+            print(f"wrote {target}" + (" (incomplete: see attrs 'failure')" if code else ""))
+        if target != args.output:
+            print(f"{args.output} keeps the state the run can go on from (--restart {args.output})")
         code = code or written
     outputs = []
     if args.plot:
@@ -376,7 +392,8 @@ def cmd_study(args) -> int:
     if args.output:
         code, kept = _write_or_keep(ds, args.output)
         if code == 0:
-            print(f"wrote {args.output} (cases in {archive}/)")
+            kept_cases = archive.is_dir() and any(archive.glob("*.nc"))  # (its folder may have gone during the run)
+            print(f"wrote {args.output}" + (f" (cases in {archive}/)" if kept_cases else " (its cases were not kept)"))
     missing = False
     for norm in ("error", "error_V", "error_Q", "error_beta", "error_beta_end"):
         rates = ds.observed_order.sel(norm=norm)

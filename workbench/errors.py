@@ -10,12 +10,19 @@
 * :class:`StepLimitExceeded` — the explicit scheme's state reached springs whose stability
   limit is below its step; stopped like :class:`Diverged`, with what was computed.
 * :class:`NotWritten` — a file of a computed result could not be written; it carries the result.
+* :class:`Unwritable` — an output path that cannot be written: a ParameterError and an OSError.
 """
 from __future__ import annotations
 
 
 class ParameterError(ValueError):
     """A bad parameter value or name; the message names the parameter and the allowed range."""
+
+
+class Unwritable(ParameterError, OSError):
+    """An output path that cannot be written (a folder where a file is meant, a parent that is a file, no permission):
+    a bad parameter when checked before the run, and an :class:`OSError` like any failed write when the path changed
+    during the run (a folder removed, a file made in its place), so that what was computed is kept elsewhere."""
 
 
 class StepTooLarge(ParameterError):

@@ -25,7 +25,7 @@ import re
 import secrets
 from pathlib import Path
 
-from ..errors import ParameterError
+from ..errors import Unwritable
 
 
 def _umask() -> int:
@@ -118,26 +118,26 @@ def check_output(path, option: str, *, folder: bool = False) -> Path:
     """Refuse, before any work, an output path that cannot be written: an existing directory where a file is
     meant (or a file where a folder is meant), a parent that is a file, a folder without write permission."""
     if str(path).strip() == "":
-        raise ParameterError(f"{option} '': give a {'folder' if folder else 'file'} name")
+        raise Unwritable(f"{option} '': give a {'folder' if folder else 'file'} name")
     path = Path(path)
     longest = max((len(part.encode()) for part in path.parts), default=0)
     if longest > 255:
-        raise ParameterError(f"{option} {str(path)[:60]!r}...: a name in it is {longest} bytes long, more than the 255 "
+        raise Unwritable(f"{option} {str(path)[:60]!r}...: a name in it is {longest} bytes long, more than the 255 "
                              "a file system allows")
     whole = len(os.fsencode(os.path.abspath(path)))
     if whole >= 4096:  # (PATH_MAX on Linux: the temporary beside it would not open)
-        raise ParameterError(f"{option} {str(path)[:60]!r}...: the path is {whole} bytes long, more than the 4095 a "
+        raise Unwritable(f"{option} {str(path)[:60]!r}...: the path is {whole} bytes long, more than the 4095 a "
                              "file system allows")
     if path.exists() and not path.is_file() and not path.is_dir():
-        raise ParameterError(f"{option} {str(path)!r} exists and is not a regular file (a device, a pipe or a socket); "
+        raise Unwritable(f"{option} {str(path)!r} exists and is not a regular file (a device, a pipe or a socket); "
                              "give a file name")
     if folder:
         if path.exists() and not path.is_dir():
-            raise ParameterError(f"{option} {str(path)!r} is a file; give a folder for the files")
+            raise Unwritable(f"{option} {str(path)!r} is a file; give a folder for the files")
         target = path
     else:
         if path.is_dir():
-            raise ParameterError(f"{option} {str(path)!r} is a directory; give a file name, e.g. {str(path / 'out')}")
+            raise Unwritable(f"{option} {str(path)!r} is a directory; give a file name, e.g. {str(path / 'out')}")
         target = path.parent
     existing = target
     while not existing.exists():
@@ -145,9 +145,9 @@ def check_output(path, option: str, *, folder: bool = False) -> Path:
             break
         existing = existing.parent
     if existing.exists() and not existing.is_dir():
-        raise ParameterError(f"{option} {str(path)!r}: {str(existing)!r} is a file, not a folder")
+        raise Unwritable(f"{option} {str(path)!r}: {str(existing)!r} is a file, not a folder")
     if existing.exists() and (not os.access(existing, os.W_OK | os.X_OK) or _virtual(existing)):
-        raise ParameterError(f"{option} {str(path)!r}: no permission to write in {str(existing)!r}")
+        raise Unwritable(f"{option} {str(path)!r}: no permission to write in {str(existing)!r}")
     return path
 
 

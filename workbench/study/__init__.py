@@ -305,7 +305,7 @@ def _keep(ds, path: Path, warn: bool) -> bool:
         return True
     except OSError as err:
         if warn:
-            warnings.warn(f"the case archive {err.filename} could not be written ({err.strerror or err}): the study "
+            warnings.warn(f"the case archive {path} could not be written ({err.strerror or err}): the study "
                           "goes on without keeping its cases (a study run again recomputes them)", RuntimeWarning,
                           stacklevel=3)
         return False
