@@ -288,6 +288,18 @@ def test_study_axis_values_are_checked():
         Study("tp1", k=[0.02, 0.01], reference="ode", workers=-1)
 
 
+def test_the_horizon_T_is_not_a_sweep_axis():
+    """Swept, T's cases were all compared on [0, the scene's T]: the T = 2 cases of a rod gave the T = 1 errors
+    exactly, and a T below the scene's was refused for snapshots the user never set. T is refused as an axis (sweep,
+    couple, grids; the command line's --sweep), by name, before any work."""
+    for kwargs in (dict(sweep={"T": [1.0, 2.0]}), dict(couple={"T": lambda v: 10 * v["k"]}),
+                   dict(grids=[{"k": [0.04, 0.02], "T": [1.0]}])):
+        with pytest.raises(workbench.ParameterError, match=r"T is the time every case is compared to"):
+            Study("rod", **({"k": [0.04, 0.02]} if "grids" not in kwargs else {}), **kwargs)
+    p = _cli("study", "rod", "--k", "0.04", "0.02", "--sweep", "T=0.5,1", "--workers", "0")
+    assert p.returncode == 2 and p.stderr.startswith("error: sweep: T is the time every case"), p.stderr
+
+
 @pytest.mark.slow
 def test_study_set_of_a_swept_name():
     """`--set h=...` in a study was dropped silently: it is the scene value (honoured) unless --h sweeps it too."""

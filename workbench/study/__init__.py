@@ -371,6 +371,10 @@ def _check_arguments(*, sweep, grids, couple, measures, client) -> None:
         for name in table or {}:
             if name not in PARAMETERS:
                 raise ParameterError(f"{what}: {name!r} is not a parameter" + closest_name(str(name), PARAMETERS))
+    for what, table in (("sweep", sweep), ("couple", couple), *(("grids", g) for g in grids or ())):
+        if isinstance(table, dict) and "T" in table:  # (its cases were compared on [0, the scene's T] alone)
+            raise ParameterError(f"{what}: T is the time every case is compared to, the same for all: give it once "
+                                 "(T=..., --set T=...), and one study per T to compare horizons")
     for name, rule in (couple or {}).items():
         if not callable(rule):
             raise ParameterError(f"couple: {name} = {rule!r} is not a function of a case's values")
