@@ -842,6 +842,21 @@ def test_point_with_wrong_number_of_coordinates(scene, key, value):
     assert key in msg and "coordinate" in msg and "not inside" not in msg, msg
 
 
+@pytest.mark.parametrize("scene, values", [
+    ("hertz", dict(h=0.25, T=0.04, probes=((0.0, 0.5), (0.9, 0.1)))),  # (a half-disc: its box's corner)
+    ("hertz3d", dict(h=0.5, T=0.04, probes=((0.9, 0.9, 0.1),))),
+])
+def test_a_probe_in_the_bodys_box_but_outside_its_mesh_is_refused_by_name(scene, values, monkeypatch):
+    """A scene checks its probes against the body's box; a curved body does not fill it, and a probe there failed at
+    the first record with NGSolve's TypeError (a traceback, nothing kept). Refused by name after the mesh is made,
+    before any factorization."""
+    from workbench.discrete import solvers
+
+    monkeypatch.setattr(solvers, "factor", lambda *a, **k: pytest.fail("factored before the probes were checked"))
+    with pytest.raises(ParameterError, match=r"^probes: point \(0\.9, .*lies in the body's box but outside its mesh"):
+        workbench.run(scene, progress=False, **values)
+
+
 # ------------------------------------------------------------------------------------------------------
 # item 14: names that reach the file system are sanitised
 # ------------------------------------------------------------------------------------------------------

@@ -454,6 +454,22 @@ def build(model_or_scene, scene=None, numerics=None) -> Discretisation:
     return d
 
 
+def probes_outside(d: Discretisation) -> str:
+    """A sentence naming the scene's probes that no cell of the mesh holds ("" where each lies in one): a scene checks
+    them against the body's box, and a curved or meshed body does not fill its box.
+
+    >>> from workbench.input.scenes import scene
+    >>> probes_outside(build(scene("hertz", h=0.25, probes=((0.0, 0.5), (0.9, 0.1)))))
+    "probes: point (0.9, 0.1) lies in the body's box but outside its mesh; give points inside the body"
+    """
+    probes = d.scene["probes"]
+    outside = [tuple(float(c) for c in probes[i]) for i in np.flatnonzero(np.atleast_1d(d.probe_points["nr"]) < 0)]
+    if not outside:
+        return ""
+    return (f"probes: point{'s' if len(outside) > 1 else ''} {', '.join(map(str, outside))} "
+            f"lie{'' if len(outside) > 1 else 's'} in the body's box but outside its mesh; give points inside the body")
+
+
 def assemble(d: Discretisation, matrices: bool = True, preconditioner: str | None = None) -> None:
     """The constant parts of the terms the model declares, and no others: the stiffness of each tensor (the elastic
     one, the viscous one of a Kelvin-Voigt body, those of a relaxation kernel), the contact side where contact laws

@@ -173,8 +173,14 @@ def discretise(model, scene, numerics):
     distributed over several (:class:`DistributedDiscretisation`)."""
     w = world()
     if not w.parallel:
-        return discretisation.build(model, scene, numerics)
-    return DistributedDiscretisation(model, scene, numerics, w)
+        d = discretisation.build(model, scene, numerics)
+        outside = discretisation.probes_outside(d)
+    else:
+        d = DistributedDiscretisation(model, scene, numerics, w)
+        outside = w.bcast(discretisation.probes_outside(d.shell.disc) if w.root else None)  # (rank 0's serial mesh)
+    if outside:  # (before any factorization: the first record's point evaluation failed on it)
+        raise ParameterError(outside)
+    return d
 
 
 class DistributedDiscretisation(discretisation.Discretisation):
