@@ -445,6 +445,58 @@ def test_an_output_folder_made_a_file_during_the_run_keeps_the_result(tmp_path, 
         assert "could not be written at t = " in err.err and "the run goes on" in err.err, err
 
 
+#: ``workbench`` (its console entry) that sends itself ``signal`` in the step after t = 0.1 s.
+_SIGNALLED_AT = """
+import os, signal, sys
+from workbench.schemes import stepping
+from workbench.cli import console
+
+advance, SIGNAL = stepping._advance, int(sys.argv.pop(1))
+
+def advance_then_signal(scheme, steps, t_prev, t):
+    if t_prev >= 0.1:
+        os.kill(os.getpid(), SIGNAL)
+    return advance(scheme, steps, t_prev, t)
+
+stepping._advance = advance_then_signal
+sys.exit(console())
+"""
+
+
+@pytest.mark.parametrize("signum, code", [(2, 130), (15, 143)], ids=["SIGINT", "SIGTERM"])
+def test_a_run_stopped_by_a_signal_writes_the_steps_it_took(tmp_path, signum, code):
+    """Ctrl-C (SIGINT) or SIGTERM (a batch scheduler's time limit) ended ``workbench run -o`` with nothing written:
+    every step computed was lost. Now the steps recorded before are written as a diverged run's are (incomplete, the
+    message in ``failure``), and the exit code is 128 + the signal's number."""
+    p = subprocess.run([sys.executable, "-c", _SIGNALLED_AT, str(signum), "run", "tp5", "--h", "0.1", "--k", "0.01",
+                        "--T", "1", "--no-progress", "-o", "a.nc"], cwd=tmp_path, capture_output=True, text=True)
+    assert p.returncode == code and "Traceback" not in p.stderr, p.stderr
+    assert "interrupted" in p.stderr or "terminated" in p.stderr
+    ds = workbench.load(tmp_path / "a.nc")
+    assert ds.attrs["status"] == "incomplete" and ds.attrs["failure_type"] == "Interrupted"
+    assert float(ds.time[-1]) == pytest.approx(0.1) and "its steps to t = 0.1 s are kept" in ds.attrs["failure"]
+
+
+def test_an_interrupted_run_in_python_carries_what_it_computed(monkeypatch):
+    """In a notebook, the kernel's interrupt (KeyboardInterrupt) inside a step: ``workbench.Interrupted``, still a
+    KeyboardInterrupt, whose ``dataset`` holds the steps before."""
+    from workbench.schemes import stepping
+
+    advance = stepping._advance
+
+    def interrupted(scheme, steps, t_prev, t):
+        if t_prev >= 0.05:
+            raise KeyboardInterrupt
+        return advance(scheme, steps, t_prev, t)
+
+    monkeypatch.setattr(stepping, "_advance", interrupted)
+    with pytest.raises(KeyboardInterrupt) as err:
+        workbench.run("tp1", h=0.1, k=0.01, T=0.2, progress=False)
+    assert isinstance(err.value, workbench.errors.Interrupted)
+    ds = err.value.dataset
+    assert ds.attrs["status"] == "incomplete" and float(ds.time[-1]) == pytest.approx(0.05)
+
+
 #: A command line whose figure and VTK writes fail with a full disk (the archive, if any, is written).
 _FULL_AT_THE_END = """
 import errno, sys

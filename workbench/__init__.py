@@ -15,10 +15,10 @@ True
 """
 from importlib import import_module
 
-from .errors import Diverged, ParameterError
+from .errors import Diverged, Interrupted, ParameterError
 
 __version__ = "0.1.0"
-__all__ = ["run", "load", "write", "scene", "Scene", "Study", "ParameterError", "Diverged"]
+__all__ = ["run", "load", "write", "scene", "Scene", "Study", "ParameterError", "Diverged", "Interrupted"]
 
 _LAZY = {"run": "running.runner", "load": "output.results", "write": "output.results", "scene": "input.scenes",
          "Scene": "input.scenes", "Study": "study"}

@@ -13,7 +13,8 @@ Examples (shell)::
 Exit codes: 0 done; 2 a user's mistake (one line ``error: ...`` on stderr, before any
 work); 3 the run diverged (the computed part is kept and marked incomplete); 4 an
 output could not be written at the end (the result is kept elsewhere, and the
-message says where). Warnings are printed as one line ``warning: ...`` each.
+message says where); 130 (Ctrl-C) and 143 (SIGTERM) interrupted (a run keeps the steps it
+recorded, as for 3). Warnings are printed as one line ``warning: ...`` each.
 """
 from __future__ import annotations
 
@@ -22,7 +23,7 @@ import os
 import sys
 import warnings
 
-from .errors import ParameterError
+from .errors import Interrupted, ParameterError
 
 EXIT_BAD_INPUT, EXIT_DIVERGED, EXIT_NOT_WRITTEN = 2, 3, 4
 #: An error line longer than this is cut (an echoed 60 kB expression helps nobody).
@@ -278,8 +279,19 @@ def cmd_run(args) -> int:
             return EXIT_DIVERGED
         print(_one_line(f"error: {err}"), file=sys.stderr)
         ds, code = err.dataset, EXIT_DIVERGED
+    except Interrupted as err:  # (Ctrl-C, SIGTERM: the steps before are written as a diverged run's are)
+        if err.dataset is None:
+            raise
+        print(_one_line(f"error: {err}"), file=sys.stderr)
+        ds, code = err.dataset, 128 + err.signal
     if ds is None:  # (several MPI processes: rank 0 holds the result and writes it)
         return code
+    return _write_run(args, ds, code)
+
+
+def _write_run(args, ds, code: int) -> int:
+    """The status line, ``-o``'s archive, then ``--plot`` and ``--vtk`` (a stopped run's too: ``code`` says why it
+    stopped, 0 where it did not); the exit code."""
     print(_status_line(ds))
     kept = None
     if args.output:
@@ -555,9 +567,9 @@ def main(argv=None) -> int:
             if sys.stdout is stdout:
                 print(_one_line(f"error: {err}"), file=sys.stderr)
             return EXIT_BAD_INPUT
-        except KeyboardInterrupt:
+        except KeyboardInterrupt as err:
             print("error: interrupted", file=sys.stderr)
-            return 130
+            return 128 + err.signal if isinstance(err, Interrupted) else 130
         except BrokenPipeError:  # the reader left (`workbench show tp5 | head`): stop quietly, as Unix tools do
             try:
                 os.dup2(os.open(os.devnull, os.O_WRONLY), sys.stdout.fileno())
@@ -599,6 +611,20 @@ def _other_rank() -> bool:
     return not world().root
 
 
+def _terminate_as_interrupt() -> None:
+    """SIGTERM (a batch scheduler's time limit, ``kill``) stops the command as Ctrl-C does, so a run keeps the steps
+    it recorded (exit 143); one process only: MPI's ranks are ended by their launcher."""
+    import signal
+
+    from .discrete.world import launched
+
+    def interrupt(signum, frame):
+        raise Interrupted("terminated (SIGTERM)", signal=signum)
+
+    if launched() <= 1:
+        signal.signal(signal.SIGTERM, interrupt)
+
+
 def console() -> int:
     """The ``workbench`` command, a process of its own: one that runs no sweep skips what it does not use
     (:func:`workbench.running.threads.lean_process`, first: the module imports nothing heavy); ``study`` may send
@@ -608,6 +634,7 @@ def console() -> int:
         from .running.threads import lean_process
 
         lean_process()
+    _terminate_as_interrupt()
     try:
         return main()
     except Exception:

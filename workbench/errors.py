@@ -11,6 +11,7 @@
   limit is below its step; stopped like :class:`Diverged`, with what was computed.
 * :class:`NotWritten` — a file of a computed result could not be written; it carries the result.
 * :class:`Unwritable` — an output path that cannot be written: a ParameterError and an OSError.
+* :class:`Interrupted` — a run stopped by Ctrl-C or SIGTERM; it carries what was computed.
 """
 from __future__ import annotations
 
@@ -48,6 +49,16 @@ class NewtonFailed(Diverged):
 class StepLimitExceeded(Diverged):
     """The explicit scheme's step exceeds the stability limit of the springs that act in the state the run has
     reached (they were not acting when it started); ``dataset`` holds the steps before, marked incomplete."""
+
+
+class Interrupted(KeyboardInterrupt):
+    """A run stopped from outside: Ctrl-C (SIGINT), or SIGTERM on the command line (a batch scheduler's time limit).
+    ``dataset`` holds the steps recorded before, marked incomplete (no state to go on from: the step under way may
+    have been left half done; ``checkpoint_every`` keeps one); ``signal`` is the signal's number."""
+
+    def __init__(self, message="interrupted", dataset=None, signal: int = 2):
+        super().__init__(message)
+        self.dataset, self.signal = dataset, signal
 
 
 class NotWritten(OSError):

@@ -21,7 +21,7 @@ from pathlib import PurePath
 import numpy as np
 
 from .. import parallel
-from ..errors import Diverged, ParameterError
+from ..errors import Diverged, Interrupted, ParameterError
 from ..expressions import Expression
 from ..input import numerics as numerics_of
 from ..input import scenes
@@ -381,10 +381,20 @@ class _Run:
                       limit_origin=origin, resume=self.resume is not None, after_step=self._after_step())
             except Diverged as err:
                 failure = _blamed(err, sc, disc)
+            except KeyboardInterrupt as err:  # (Ctrl-C; SIGTERM on the command line: the steps before are kept)
+                if self.world.parallel:  # (the ranks may be stopped in different places: nothing to gather)
+                    raise
+                failure = err if isinstance(err, Interrupted) else Interrupted()
+                failure.args = (f"{sc.name}: {failure.args[0] if failure.args else 'interrupted'}; its steps to t = "
+                                f"{self.steps.t:.6g} s are kept",)
         ds = None  # (several MPI processes: rank 0 holds the records)
         if self.world.root:
             status = "complete" if failure is None else "incomplete"
-            ds = self.recorder.dataset(self.attrs(status, failure, self.clock.wall, self.clock.cpu))
+            try:
+                ds = self.recorder.dataset(self.attrs(status, failure, self.clock.wall, self.clock.cpu))
+            except Exception:  # (an interrupt inside a record: its variables are not all taken, nothing to keep)
+                if not isinstance(failure, Interrupted):
+                    raise
         if failure is not None:
             failure.dataset = ds
             raise failure
