@@ -337,6 +337,13 @@ def test_tolerance_sweep_of_error_controlled_runs(tmp_path):
     assert (ds.nsteps.squeeze().sel(rtol=1e-4) > ds.nsteps.squeeze().sel(rtol=1e-2)).all()
     plotting.tolerance(ds, tmp_path / "tol.png")
     assert os.path.getsize(tmp_path / "tol.png") > 10_000
+    # (the command line's --plot draws convergence: for tolerances alone it is the tolerance plot; with k swept too
+    # the fitted order, which has no rtol axis, was selected at each rtol: KeyError)
+    plotting.convergence(ds, tmp_path / "conv.png")
+    assert os.path.getsize(tmp_path / "conv.png") > 10_000
+    both = Study("tp1", k=[0.1, 0.05], sweep={"rtol": [1e-2, 1e-4]}, scheme="bdf2", reference="exact", workers=0)
+    plotting.convergence(both.run(progress=False), tmp_path / "both.png")
+    assert os.path.getsize(tmp_path / "both.png") > 10_000
 
 
 def test_study_whose_first_case_is_refused():

@@ -172,7 +172,10 @@ def _label(sel):
 
 
 def convergence(study_ds, path=None, norms=("error", "error_V", "error_Q", "error_beta")):
-    """Log-log error against h + k (coupled sweeps), h or k, with fitted orders and a slope-1 guide."""
+    """Log-log error against h + k (coupled sweeps), h or k, with fitted orders and a slope-1 guide; a sweep of
+    tolerances alone (an ``rtol`` axis, one h and one k) is drawn by :func:`tolerance`."""
+    if study_ds.sizes.get("rtol", 1) > 1 and study_ds.sizes.get("h", 1) == 1 and study_ds.sizes.get("k", 1) == 1:
+        return tolerance(study_ds, path)
     along, x, series, finest = _series(study_ds)
     norms = [n for n in norms if n in study_ds and np.isfinite(study_ds[n].values).any()]
     fig, axes = figure(1, len(norms), figsize=(3.8 * len(norms), 3.6), squeeze=False)
@@ -183,7 +186,8 @@ def convergence(study_ds, path=None, norms=("error", "error_V", "error_Q", "erro
             good = np.isfinite(y) & (y > 0)
             if not good.any():
                 continue
-            rate = float(study_ds.observed_order.sel(norm=norm, along=along).sel(sel))
+            fitted = study_ds.observed_order.sel(norm=norm, along=along)  # (per case of the axes it was fitted on)
+            rate = float(fitted.sel({d: v for d, v in sel.items() if d in fitted.dims}).max())
             ax.loglog(x[good], y[good], "o-", label=f"{_label(sel)}: {rate:.2f}")
             ax.loglog(x[good], y[good][0] * (x[good] / x[good][0]), ":", color="gray")
         units = study_ds[norm].attrs.get("units", "")
