@@ -286,6 +286,11 @@ def test_study_axis_values_are_checked():
         Study("tp1", k=[0.02, 0.01], reference="ode", n_compare=0)
     with pytest.raises(workbench.ParameterError, match="workers"):
         Study("tp1", k=[0.02, 0.01], reference="ode", workers=-1)
+    # a value twice (k = [0.1, 0.1]) made a second case of NaN errors and a k index that selects two
+    with pytest.raises(workbench.ParameterError, match=r"^k: 0.1 is given twice; give each value once"):
+        Study("tp1", h=0.1, k=[0.1, 0.1])
+    with pytest.raises(workbench.ParameterError, match=r"^c_nu: 1.0 is given twice"):
+        Study("tp1", k=[0.1, 0.05], sweep={"c_nu": [1, 1.0]})
 
 
 def test_the_horizon_T_is_not_a_sweep_axis():

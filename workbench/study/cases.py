@@ -125,6 +125,11 @@ def expand(scene, grids, couple) -> tuple[list, dict]:
                 raise ParameterError(f"{name} is both swept and coupled; give it one way")
     per_grid = [{n: [_coerce(scene, n, v) for v in _values(n, grid.get(n, [scene[n]]))] for n in names}
                 for grid in grids]
+    for g in per_grid:  # (a value twice made a second case of NaN errors and an index that selects two)
+        for n, vals in g.items():
+            twice = [v for i, v in enumerate(vals) if v in vals[:i]]
+            if twice:
+                raise ParameterError(f"{n}: {twice[0]!r} is given twice; give each value once")
     axes: dict = {}
     for n in names:
         vals = []
