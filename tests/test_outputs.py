@@ -73,9 +73,18 @@ def test_figures_say_what_they_show(tmp_path):
     titles = " ".join([fig._suptitle.get_text() if fig._suptitle else ""] + [ax.get_title() for ax in fig.axes])
     assert "disagree with the reduced ODE" in titles, titles
     st = Study("tp1", k=[0.1, 0.05], h=[0.1], reference="exact", workers=0)
-    fig = plotting.convergence(st.run(progress=False))
+    study = st.run(progress=False)
+    fig = plotting.convergence(study)
     labels = [ax.get_ylabel() for ax in fig.axes if ax.lines]
     assert labels and all("[" in y for y in labels), labels
+    # the other kind of Dataset (or none) is a ParameterError naming the function; it was a KeyError or an
+    # AttributeError from deep inside
+    for draw, wrong, said in ((plotting.overview, study, "the Dataset is a study's"),
+                              (plotting.convergence, tp2, "the Dataset is a run's"),
+                              (plotting.pareto, tp2, "the Dataset is a run's"), (plotting.tolerance, tp2, "a run's"),
+                              (plotting.overview, "tp2.nc", "give the xarray Dataset of a run, got str")):
+        with pytest.raises(workbench.ParameterError, match=f"^plotting.{draw.__name__}: .*{said}"):
+            draw(wrong)
 
 
 def test_model_b_overview_and_vtk_show_pressure_and_states(tmp_path):

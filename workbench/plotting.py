@@ -58,6 +58,22 @@ def _probe_label(ds, p):
     return "(" + ", ".join(f"{float(ds[f'probe_{c}'][p]):g}" for c in ds.component.values) + ")"
 
 
+def _of_kind(ds, study: bool, where: str) -> None:
+    """A ParameterError naming ``where``'s argument unless ``ds`` is a run's Dataset (``study`` False: it has probes)
+    or a study's (it has fitted orders): the other kind failed deep inside with a KeyError or an AttributeError."""
+    import xarray as xr
+
+    from .errors import ParameterError
+
+    if not isinstance(ds, xr.Dataset):
+        raise ParameterError(f"plotting.{where}: give the xarray Dataset of a {'study' if study else 'run'}, "
+                             f"got {type(ds).__name__}")
+    if study != ("observed_order" in ds):
+        kind, other = ("a study's", "a run's") if study else ("a run's", "a study's")
+        raise ParameterError(f"plotting.{where}: the Dataset is {other}; it draws {kind} (workbench."
+                             f"{'Study(...).run()' if study else 'run(...)'} or workbench.load of its archive)")
+
+
 def overview(ds, path=None):
     """A run at a glance: probe displacements over time, then what the model has on its contact side.
 
@@ -66,6 +82,7 @@ def overview(ds, path=None):
     and the normal displacement along the contact side (gap drawn) at four times, and the
     contact states of every node over time (the rod: pressure and state over time).
     """
+    _of_kind(ds, False, "overview")
     comp = ds.component.values[-1]  # vertical (normal) component in 2D/3D, x in 1D
     model_b = "contact_state" in ds
     panels = _overview_panels(ds)
@@ -174,6 +191,7 @@ def _label(sel):
 def convergence(study_ds, path=None, norms=("error", "error_V", "error_Q", "error_beta")):
     """Log-log error against h + k (coupled sweeps), h or k, with fitted orders and a slope-1 guide; a sweep of
     tolerances alone (an ``rtol`` axis, one h and one k) is drawn by :func:`tolerance`."""
+    _of_kind(study_ds, True, "convergence")
     if study_ds.sizes.get("rtol", 1) > 1 and study_ds.sizes.get("h", 1) == 1 and study_ds.sizes.get("k", 1) == 1:
         return tolerance(study_ds, path)
     along, x, series, finest = _series(study_ds)
@@ -203,6 +221,7 @@ def convergence(study_ds, path=None, norms=("error", "error_V", "error_Q", "erro
 def tolerance(study_ds, path=None, error="error", cost="wall_time"):
     """Error-controlled sweeps (an ``rtol`` axis): the achieved error against the tolerance (with the lines
     error = rtol, 0.1 rtol and 10 rtol), and the cost against the achieved error, one line per other case."""
+    _of_kind(study_ds, True, "tolerance")
     if "rtol" not in study_ds.dims:
         raise ValueError("tolerance plots need a study with an rtol axis (sweep={'rtol': [...]})")
     rtol = study_ds.rtol.values
@@ -255,6 +274,7 @@ def _kinds(index, names):
 def pareto(study_ds, path=None, error="error", cost="wall_time"):
     """Error against cost (wall time incl. setup) of every case; the Pareto front (``study_ds.pareto``) joined and
     numbered, the numbers explained beside the plot."""
+    _of_kind(study_ds, True, "pareto")
     err_da = study_ds[error]
     c_da = study_ds[cost] + (study_ds["setup_time"] if cost == "wall_time" else 0)
     front_da = study_ds["pareto"] if error == "error" and "pareto" in study_ds else None
