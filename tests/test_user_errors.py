@@ -834,6 +834,10 @@ def test_requested_times_off_a_given_grid_are_refused():
         workbench.run("tp1", times=grid, snapshots=(), record_times=[0.5], progress=False)
     with pytest.raises(ParameterError, match="times: the grid ends at 0.7, not at T = 1"):
         workbench.run("tp1", times=grid[:-1], snapshots=(), progress=False)
+    # the scene's own snapshots, which the user never set, are named as such, with the way to take none
+    with pytest.raises(ParameterError, match=r"time 0\.2 is not on .*\(snapshots = \[0\.2, .*\], the scene's; "
+                                             r"snapshots=\(\) takes none\)$"):
+        workbench.run("tp2", scheme="implicit", times=[0.0, 0.5, 1.0], progress=False)
     with pytest.raises(ParameterError, match="record time 1.5 is outside the run"):
         workbench.run("tp1", k=0.1, record_times=[0.5, 1.5], progress=False)
     ds = workbench.run("tp1", h=0.1, times=np.arange(0.0, 1.05, 0.1), snapshots=(0.3, 0.7), record_times=[0.3],

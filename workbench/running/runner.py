@@ -173,7 +173,11 @@ def _grid(sc, numerics, times, record_times, resume):
     try:
         grid = time_grid(sc["T"], sc["k"], times, sync=sync)
     except ValueError as err:
-        raise ParameterError(str(err)) from None
+        hint = ""
+        if "snapshot or record" in str(err) and sc["snapshots"]:  # (a scene's own snapshots, which the user never set)
+            whose = "" if "snapshots" in sc.set_by_user else ", the scene's"
+            hint = f" (snapshots = {list(sc['snapshots'])}{whose}; snapshots=() takes none)"
+        raise ParameterError(f"{err}{hint}") from None
     if resume is not None and not numerics.adaptive:
         restarts.check_grid(resume.path, grid, resume.state, resume.archive)
     return grid, sync, record_times
