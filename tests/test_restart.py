@@ -15,6 +15,7 @@ import signal
 import subprocess
 import sys
 import time
+import warnings
 from pathlib import Path
 
 import numpy as np
@@ -120,6 +121,19 @@ def test_a_checkpoint_continued_without_a_file_says_the_value_is_the_archives(tm
     with pytest.raises(workbench.ParameterError, match=refusal):
         workbench.run(restart=path, progress=False)
     assert_same_run(workbench.run(restart=path, checkpoint_every=0, progress=False), straight)
+
+
+def test_a_checkpoint_file_without_checkpoint_every_is_warned_about(tmp_path):
+    """``workbench.run(..., checkpoint=PATH)`` with checkpoint_every = 0 wrote nothing there, silently (the reverse is
+    refused): a warning says so and how to write; the command line's -o, which is its archive, is not warned about."""
+    from workbench import cli
+
+    with pytest.warns(RuntimeWarning, match=r"checkpoint = '.*cp\.nc': nothing is written there, checkpoint_every"):
+        workbench.run("tp1", h=0.5, k=0.5, checkpoint=tmp_path / "cp.nc", progress=False)
+    assert not (tmp_path / "cp.nc").exists()
+    with warnings.catch_warnings():
+        warnings.simplefilter("error")
+        assert cli.main(["run", "tp1", "--h", "0.5", "--k", "0.5", "--no-progress", "-o", str(tmp_path / "a.nc")]) == 0
 
 
 def test_a_continuation_records_at_the_record_times_its_archive_was_given(tmp_path):

@@ -138,6 +138,13 @@ def _check_checkpoint(sc, checkpoint, inherited: bool = False) -> None:
                    "checkpoints") if inherited else ")"
         raise ParameterError(f"{whose}checkpoint_every = {sc['checkpoint_every']} needs a file to write the "
                              f"checkpoints to: give -o OUT.nc (workbench.run: checkpoint=PATH{instead}")
+    from ..output import invocation
+
+    if checkpoint is not None and not sc["checkpoint_every"] and invocation.get() is None:  # (the command's -o: its
+        # archive, with or without checkpoints; workbench.run's checkpoint is only where they go)
+        warnings.warn(f"checkpoint = {str(checkpoint)!r}: nothing is written there, checkpoint_every is 0 (give "
+                      "checkpoint_every = N to write the run so far every N steps; workbench.write(ds, PATH) writes "
+                      "the result)", RuntimeWarning, stacklevel=3)
 
 
 def _check_options(overrides: dict, checkpoint, limit, threads, progress=None) -> None:
