@@ -26,6 +26,7 @@ import shutil
 import subprocess
 import sys
 import time
+import warnings
 from concurrent.futures import ThreadPoolExecutor
 from dataclasses import dataclass
 from pathlib import Path
@@ -896,6 +897,22 @@ def test_point_with_wrong_number_of_coordinates(scene, key, value):
         workbench.scene(scene, **{key: value})
     msg = str(err.value)
     assert key in msg and "coordinate" in msg and "not inside" not in msg, msg
+
+
+@pytest.mark.parametrize("scene, values, said", [
+    ("tp1", dict(h=0.5, k=0.05, k_max=0.1, atol=1e-6), "atol = 1e-06, k_max = 0.1 have no effect without rtol > 0"),
+    ("tp4", dict(h=0.1, T=0.02, adhesion=False, gamma_nu=5.0), "gamma_nu = 5.0 has no effect without adhesion = true"),
+])
+def test_a_value_that_acts_only_with_another_that_is_off_is_warned_about(scene, values, said):
+    """k_max without error control, gamma_nu without adhesion: ignored without a word before. A warning names them
+    (they are the user's, so not refused: a scene file may keep them for another run); given where they act, none."""
+    with pytest.warns(RuntimeWarning, match=re.escape(said)):
+        workbench.run(scene, progress=False, **values)
+    on = dict(values, rtol=1e-3, scheme="implicit") if "k_max" in values else dict(values, adhesion=True)
+    with warnings.catch_warnings():
+        warnings.simplefilter("error", RuntimeWarning)
+        warnings.filterwarnings("ignore", message=".*lock in bending")
+        workbench.run(scene, progress=False, **on)
 
 
 @pytest.mark.parametrize("scene, values", [

@@ -157,7 +157,25 @@ def warnings_for(scene, model) -> list:
         out.append(f"{scene.name}: P1 elements on a thin body (thickness / length = {g.aspect():.2g}) lock in bending, "
                    "so displacements come out too small (the block at h = 0.05: 50 %; the slab at h = 0.0125: 5 %); "
                    "order = 2 converges at the same cost")
-    return out + _contact_zone(scene, g) + _quadrature_cost(scene, model)
+    return out + _contact_zone(scene, g) + _quadrature_cost(scene, model) + _unused(scene)
+
+
+#: Parameters that act only with another: (the parameters, whether that other acts, what it is).
+_ONLY_WITH = ((("atol", "k_min", "k_max"), lambda v: v["rtol"] > 0, "rtol > 0 (error-controlled steps)"),
+              (("gamma_nu", "eps_a", "L", "beta0", "c_tau", "bonding_truncation"), lambda v: v.get("adhesion", False),
+               "adhesion = true"))
+
+
+def _unused(scene) -> list:
+    """A value the user gave that has no effect (it acts only with another that is off: k_max without rtol, gamma_nu
+    without adhesion), which was ignored without a word."""
+    out = []
+    for names, acts, what in _ONLY_WITH:
+        given = [name for name in names if name in scene.set_by_user and name in scene.values]
+        if given and not acts(scene.values):
+            out.append(f"{scene.name}: {', '.join(f'{n} = {scene[n]}' for n in given)} "
+                       f"{'has' if len(given) == 1 else 'have'} no effect without {what}")
+    return out
 
 
 #: Seconds per (step x stored step x displacement dof) of the quadrature memory (the rod, ndof 21: 10 s for 1e4
