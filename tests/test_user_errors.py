@@ -855,6 +855,16 @@ def test_toml_traction_table_conflicts_with_parameters(tmp_path):
         workbench.scene(f)
 
 
+@pytest.mark.parametrize("name", ['""', '"   "'])
+def test_toml_empty_name_is_refused(tmp_path, name):
+    """``name = ""`` made the status line ": complete" and an archive named by nothing: refused, naming the file's
+    own name as what leaving it out gives."""
+    f = tmp_path / "run.toml"
+    f.write_text(f'scene = "tp1"\nname = {name}\n')
+    with pytest.raises(ParameterError, match=r"^run.toml: name = '\s*': give a name, or leave it out \(the file's: 'run'\)"):
+        workbench.scene(f)
+
+
 @pytest.mark.parametrize("name", ["k", "h"])
 def test_study_scalar_string_is_not_read_character_by_character(name):
     """``Study("tp1", k="0.1")`` iterates over the characters of "0.1" today and fails with a bare

@@ -606,6 +606,9 @@ def from_toml(path, overrides: dict | None = None) -> Scene:
     for key in ("name", "description"):
         if key in data and not isinstance(data[key], str):
             raise ParameterError(f"{path.name}: {key} must be text, got {data[key]!r}")
+    if "name" in data and not data["name"].strip():  # (it names the run's status line, archive and files)
+        raise ParameterError(f"{path.name}: name = {data['name']!r}: give a name, or leave it out (the file's: "
+                             f"{path.stem!r})")
     values = _toml_values(path, data, base) | dict(overrides or {})
     name = data.get("name", path.stem)
     try:
