@@ -124,10 +124,12 @@ def test_every_file_is_written(results):
 
 
 def test_main_prints_the_comparison(tmp_path, capsys):
-    """The command line runs one problem and prints our numbers next to the paper's."""
+    """The command line runs one problem and prints our numbers next to the paper's (``--no-progress`` accepted, as
+    run and study take it: a script passes it to every command)."""
     from workbench.cli import main
 
-    assert main(["reproduce", "tp1", "--out", str(tmp_path), "--h", "0.1", "--k", "0.05", "--no-side"]) == 0
+    assert main(["reproduce", "tp1", "--out", str(tmp_path), "--h", "0.1", "--k", "0.05", "--no-side",
+                 "--no-progress"]) == 0
     text = capsys.readouterr().out
     assert "paper: < 1.8e-4" in text and "tp1" in text
     assert (tmp_path / "tp1_bonding.png").exists()

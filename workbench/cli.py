@@ -540,6 +540,7 @@ def build_parser() -> argparse.ArgumentParser:
     p.add_argument("--no-side", action="store_true", help="skip the side studies (sign flip, convention)")
     p.add_argument("--vtk", action="store_true", help="also write ParaView files to OUT/vtk")
     p.add_argument("--set", action="append", metavar="NAME=VALUE", help="override a scene parameter (repeatable)")
+    p.add_argument("--no-progress", action="store_true", help="accepted as for run and study (reproduce shows none)")
     p.set_defaults(func=cmd_reproduce)
     return parser
 
