@@ -359,7 +359,8 @@ def check_grid(path, grid: np.ndarray, state: dict, archive: xr.Dataset) -> None
         where = f"t = {float(grid[i])!r} s there" if i < len(grid) else "beyond its end"
         raise ParameterError(f"restart {str(path)!r}: the archive's time t = {t!r} s (step {i}) is not step {i} of the "
                              f"time grid to T = {T:g} ({where}): the new T divides time into other steps; choose a T "
-                             "that is a whole number of the archive's steps from 0")
+                             "that is a whole number of the archive's steps from 0 (an archive run on a grid of its "
+                             "own: give times= again, that grid carried on to T)")
     steps, times = archive.step.values, archive.time.values
     if len(steps) and (steps.max() >= len(grid) or np.abs(grid[steps] - times).max() > tol):
         raise ParameterError(f"restart {str(path)!r}: the archive's recorded times are not points of the time grid to "
