@@ -835,6 +835,8 @@ def test_requested_times_off_a_given_grid_are_refused():
         workbench.run("tp1", times=grid, snapshots=(), record_times=[0.5], progress=False)
     with pytest.raises(ParameterError, match="times: the grid ends at 0.7, not at T = 1"):
         workbench.run("tp1", times=grid[:-1], snapshots=(), progress=False)
+    with pytest.raises(ParameterError, match=r"times: a step of 1e-14 s is below the times told apart"):
+        workbench.run("tp1", times=[0.0, 1e-14, 0.5, 1.0], snapshots=(), progress=False)
     # the scene's own snapshots, which the user never set, are named as such, with the way to take none
     with pytest.raises(ParameterError, match=r"time 0\.2 is not on .*\(snapshots = \[0\.2, .*\], the scene's; "
                                              r"snapshots=\(\) takes none\)$"):

@@ -55,6 +55,9 @@ def time_grid(T: float, k: float, times=None, sync=()) -> np.ndarray:
             raise ValueError("times: give at least two finite times")
         if grid[0] != 0.0 or np.any(np.diff(grid) <= 0):
             raise ValueError("times: the grid must start at 0 and increase strictly")
+        if np.min(np.diff(grid)) <= tol:  # (times that close are one time wherever times are matched)
+            raise ValueError(f"times: a step of {np.min(np.diff(grid)):.3g} s is below the times told apart, "
+                             f"1e-9 max(1, T) = {tol:.3g} s")
         if abs(grid[-1] - T) > tol:
             raise ValueError(f"times: the grid ends at {grid[-1]:g}, not at T = {T:g}; end it at T or set T")
         off = [s for s in sync if np.min(np.abs(grid - s)) > tol]
