@@ -691,6 +691,16 @@ def build_inputs():  # noqa: C901 (a long list, on purpose)
     add("tb_traction_pole_t003", I, "either-naming:traction_top", RUN("slab", "--set", "traction_top=(0, 1/(t-0.03))"),
         quick=True)
     add("tb_hertz_load_pole", I, "either-naming:load", RUN("hertz", "--set", "load=1/(t-0.05)"), quick=True)
+    # (a new user's pass, 2026-12: a pole between the scene's sampled times, a probe in the box of a curved body,
+    # a study's --plot over tolerances)
+    add("tb_delta_pole_off_the_sampled_times", "own", "either-naming:delta",
+        RUN("rod", "--T", "1", "--set", "delta=0.01/(t-0.55)+0.01/0.55", "-o", "out.nc"), quick=True)
+    add("tb_probe_outside_a_curved_body", "own", "refuse-naming:probes", RUN("hertz", "--set", "probes=(0.9, 0.1)"),
+        quick=True)
+    add("tb_study_plot_of_tolerances", "own", "run", ["study", "tp2", "--sweep", "rtol=1e-2,1e-3", "--scheme", "bdf2",
+                                                      "--workers", "0", "--no-progress", "-o", "s.nc", "--plot", "s.png"])
+    add("sa_study_sweep_of_T", "own", "refuse-naming:T",
+        ["study", "rod", "--k", "0.04", "0.02", "--sweep", "T=0.5,1", "--workers", "0", "--no-progress"])
     add("tb_hertz_load_1_over_t", I, "either-naming:load", RUN("hertz", "--set", "load=1/t"))
     add("tb_hertz_load_log_t", I, "either-naming:load", RUN("hertz", "--set", "load=log(t)"))
     add("tb_hertz_load_sqrt_neg", I, "refuse-naming:load", RUN("hertz", "--set", "load=sqrt(-1)"))
