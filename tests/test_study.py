@@ -293,6 +293,16 @@ def test_study_axis_values_are_checked():
         Study("tp1", k=[0.1, 0.05], sweep={"c_nu": [1, 1.0]})
 
 
+def test_every_coordinate_of_a_study_has_units_and_a_long_name(tmp_path):
+    """As a run's archive has them (CF): order, scheme, probe, probe_x, norm, along and a swept parameter's axis had
+    none; a swept parameter's come from the parameter table. Kept through the archive."""
+    ds = Study("tp1", k=[0.1, 0.05], sweep={"gamma_nu": [0.1, 0.2]}, reference="exact", workers=0).run(progress=False)
+    back = workbench.load(workbench.write(ds, tmp_path / "s.nc"))
+    for name, coord in back.coords.items():
+        assert coord.attrs.get("long_name") and "units" in coord.attrs, name
+    assert back.gamma_nu.attrs["units"] == "Pa/m" and back.probe_x.attrs["units"] == "m"
+
+
 def test_the_horizon_T_is_not_a_sweep_axis():
     """Swept, T's cases were all compared on [0, the scene's T]: the T = 2 cases of a rod gave the T = 1 errors
     exactly, and a T below the scene's was refused for snapshots the user never set. T is refused as an axis (sweep,

@@ -145,7 +145,27 @@ def dataset(layout: Layout, rows: dict, n_probe: int, probe_coords: dict, dim: i
     ds["observed_order_stderr"] = spread
     ds["pareto"] = (dims, pareto_front(ds["error"].values, (ds["wall_time"] + ds["setup_time"]).values),
                     {"units": "1", "long_name": "1 if no other case is both cheaper and more accurate"})
+    for name in ds.coords:  # (long_name and units on every coordinate, as a run's archive has them)
+        if not ds[name].attrs:
+            ds[name].attrs.update(_coordinate_attrs(name))
     return ds
+
+
+#: The study's own coordinates: (units, long_name); a swept parameter's come from the parameter table.
+_COORDINATES = {"order": ("1", "element order"), "scheme": ("", "time-stepping scheme"),
+                "probe": ("1", "probe number"), "norm": ("", "error norm"),
+                "along": ("", "axis the order is fitted along"), "level": ("1", "refinement level (coupled axes)")}
+
+
+def _coordinate_attrs(name: str) -> dict:
+    from ..input.parameters import PARAMETERS
+
+    if name in _COORDINATES:
+        units, meaning = _COORDINATES[name]
+    else:
+        param = PARAMETERS.get(name)
+        units, meaning = (param.unit or "1", param.meaning) if param is not None else ("", name)
+    return {"units": units, "long_name": meaning}
 
 
 def _alongs(layout: Layout) -> list:
@@ -287,16 +307,16 @@ def study_dataset(study, runs: dict, compare, history: str) -> xr.Dataset:
     # the probes from the case's scene, not its run: a refused case has no Dataset to read them from
     dim = study.scene.dim
     probes = np.asarray(study.scene_of(study.listed[0])["probes"], dtype=float).reshape(-1, dim)
-    probe_coords = {f"probe_{c}": ("probe", probes[:, i]) for i, c in enumerate(("x", "y", "z")[:dim])}
+    probe_coords = {f"probe_{c}": ("probe", probes[:, i], {"units": "m", "long_name": f"{c} of the probe"})
+                    for i, c in enumerate("xyz"[:dim])}
     ds = dataset(study.layout, rows, len(probes), probe_coords, dim)
     if ref is not None and ref.kind == "difference":
         extrapolate(ds, study.layout, ref)
     ds["compare_time"] = ("compare", np.asarray(compare), {"units": "s",
                                                            "long_name": "times at which fields are compared"})
-    for name in ds.coords:
-        if name in ("h", "k"):
-            ds[name].attrs.update(units="s" if name == "k" else "m",
-                                  long_name="time step" if name == "k" else "target element size")
+    for name in set(ds.coords) & {"h", "k"}:
+        ds[name].attrs.update(units="s" if name == "k" else "m", long_name="time step" if name == "k" else "target "
+                              "element size")
     swept = set(study.axes) | set(study.coupled)
     ref_case = study.ref_case
     ds.attrs = {
