@@ -77,6 +77,9 @@ def test_figures_say_what_they_show(tmp_path):
     fig = plotting.convergence(study)
     labels = [ax.get_ylabel() for ax in fig.axes if ax.lines]
     assert labels and all("[" in y for y in labels), labels
+    fig.canvas.draw()  # (k from 0.1 to 0.05, within a decade: its axis had no labelled tick at all)
+    ticks = [t.get_text() for t in fig.axes[0].xaxis.get_ticklabels(which="both") if t.get_text()]
+    assert any(t for t in ticks if "5" in t), ticks
     # the other kind of Dataset (or none) is a ParameterError naming the function; it was a KeyError or an
     # AttributeError from deep inside
     for draw, wrong, said in ((plotting.overview, study, "the Dataset is a study's"),

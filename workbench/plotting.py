@@ -211,7 +211,9 @@ def convergence(study_ds, path=None, norms=("error", "error_V", "error_Q", "erro
         units = study_ds[norm].attrs.get("units", "")
         ax.set(xlabel=f"{along} [{'m + s' if along == 'h+k' else ('m' if along == 'h' else 's')}]",
                ylabel=f"{norm} [{units}]", title=norm)
-        ax.xaxis.set_minor_formatter(matplotlib.ticker.NullFormatter())
+        shown = np.log10(x[np.isfinite(x) & (x > 0)])
+        if shown.size and shown.max() - shown.min() >= 1.0:  # (within a decade the minor ticks are the only labels)
+            ax.xaxis.set_minor_formatter(matplotlib.ticker.NullFormatter())
         ax.legend(fontsize=7, title="fitted order", title_fontsize=7)
     fig.suptitle(f"{plain(study_ds.attrs.get('scene'))}: reference {plain(study_ds.attrs.get('reference'))} "
                  f"(dotted: slope 1)", fontsize=9)
