@@ -857,6 +857,14 @@ def test_toml_traction_table_conflicts_with_parameters(tmp_path):
         workbench.scene(f)
 
 
+def test_the_step_count_bounds_fixed_steps_only():
+    """T / k beyond 10^7 steps is refused for fixed steps; under error control k is the first step alone (a run of
+    rtol = 1e-4 from k = 1e-8 takes a few dozen steps) and was refused all the same."""
+    with pytest.raises(ParameterError, match=r"k = 1e-08 and T = 1 make 1e\+08 time steps; at most 1e\+07"):
+        workbench.scene("tp2", scheme="bdf2", k=1e-8)
+    assert workbench.scene("tp2", scheme="bdf2", rtol=1e-4, k=1e-8)["k"] == 1e-8
+
+
 @pytest.mark.parametrize("name", ['""', '"   "'])
 def test_toml_empty_name_is_refused(tmp_path, name):
     """``name = ""`` made the status line ": complete" and an archive named by nothing: refused, naming the file's
@@ -914,13 +922,16 @@ def test_point_with_wrong_number_of_coordinates(scene, key, value):
 @pytest.mark.parametrize("scene, values, said", [
     ("tp1", dict(h=0.5, k=0.05, k_max=0.1, atol=1e-6), "atol = 1e-06, k_max = 0.1 have no effect without rtol > 0"),
     ("tp4", dict(h=0.1, T=0.02, adhesion=False, gamma_nu=5.0), "gamma_nu = 5.0 has no effect without adhesion = true"),
+    ("memory_slab", dict(h=0.25, T=0.2, max_dofs=500, space_goal="pressure"),
+     "max_dofs = 500, space_goal = pressure have no effect without space_tol > 0"),
 ])
 def test_a_value_that_acts_only_with_another_that_is_off_is_warned_about(scene, values, said):
     """k_max without error control, gamma_nu without adhesion: ignored without a word before. A warning names them
     (they are the user's, so not refused: a scene file may keep them for another run); given where they act, none."""
     with pytest.warns(RuntimeWarning, match=re.escape(said)):
         workbench.run(scene, progress=False, **values)
-    on = dict(values, rtol=1e-3, scheme="implicit") if "k_max" in values else dict(values, adhesion=True)
+    on = dict(values, rtol=1e-3, scheme="implicit") if "k_max" in values else dict(values, space_tol=0.3) \
+        if "max_dofs" in values else dict(values, adhesion=True)
     with warnings.catch_warnings():
         warnings.simplefilter("error", RuntimeWarning)
         warnings.filterwarnings("ignore", message=".*lock in bending")

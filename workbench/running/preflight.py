@@ -163,7 +163,9 @@ def warnings_for(scene, model) -> list:
 #: Parameters that act only with another: (the parameters, whether that other acts, what it is).
 _ONLY_WITH = ((("atol", "k_min", "k_max"), lambda v: v["rtol"] > 0, "rtol > 0 (error-controlled steps)"),
               (("gamma_nu", "eps_a", "L", "beta0", "c_tau", "bonding_truncation"), lambda v: v.get("adhesion", False),
-               "adhesion = true"))
+               "adhesion = true"),
+              (("max_dofs", "space_adapt", "space_goal"), lambda v: v.get("space_tol", 0.0) > 0,
+               "space_tol > 0 (adaptive meshes)"))
 
 
 def _unused(scene) -> list:
