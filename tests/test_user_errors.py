@@ -857,6 +857,17 @@ def test_toml_traction_table_conflicts_with_parameters(tmp_path):
         workbench.scene(f)
 
 
+def test_model_given_to_a_scene_file_says_the_file_names_it(tmp_path):
+    """``model=`` with a scene file (a body from a mesh file among them) said it "applies to a body from a mesh",
+    which the file's body was: the file names its model itself."""
+    f = tmp_path / "s.toml"
+    f.write_text('scene = "tp1"\n')
+    with pytest.raises(ParameterError, match=r"^model = 'B': a scene file names its model in the file"):
+        workbench.scene(f, model="B")
+    with pytest.raises(ParameterError, match=r"^model = 'B' applies to a body from a mesh \(mesh=...\); a built-in"):
+        workbench.scene("tp1", model="B")
+
+
 def test_the_step_count_bounds_fixed_steps_only():
     """T / k beyond 10^7 steps is refused for fixed steps; under error control k is the first step alone (a run of
     rtol = 1e-4 from k = 1e-8 takes a few dozen steps) and was refused all the same."""

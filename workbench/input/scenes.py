@@ -737,6 +737,10 @@ def scene(name_or_path=None, *, model=None, **overrides) -> Scene:
                                  "boundaries=... for a body from a mesh")
         return _mesh_scene(name_or_path, model, overrides)
     if model is not None:
+        text = str(name_or_path)
+        if not isinstance(name_or_path, Scene) and text not in PRESETS and (_looks_like_path(text) or _is_file(text)):
+            raise ParameterError(f"model = {model!r}: a scene file names its model in the file (model = \"A\" or "
+                                 "\"B\" at its top); model= applies to a body given as mesh=...")
         raise ParameterError(f"model = {model!r} applies to a body from a mesh (mesh=...); a built-in scene has its own "
                              "model")
     if isinstance(name_or_path, Scene):
