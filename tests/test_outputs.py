@@ -35,6 +35,18 @@ def test_archive_metadata_survives_the_round_trip(tmp_path):
             assert coord.attrs.get("long_name") and "units" in coord.attrs, name
 
 
+def test_the_history_of_a_run_from_a_scene_object_runs_it_again():
+    """``workbench.run(workbench.scene("tp1", gamma_nu=0.9), h=0.1)`` recorded ``workbench.run('tp1', h=0.1)``: its
+    history named another run. The call recorded now makes the same numbers."""
+    for sc, values in ((workbench.scene("tp4", gamma_nu=0.9, traction_top="(0, -2*t)"), dict(h=0.1, T=0.03)),
+                       (workbench.scene("memory_rod", prony=[[0.5, 0.2], [0.1, 1.0]]), dict(h=0.1, T=0.2))):
+        ds = workbench.run(sc, progress=False, **values)
+        call = ds.attrs["history"].split(" ", 1)[1]
+        assert call.startswith(f"workbench.run(workbench.scene('{sc.name}', "), call
+        again = eval(call, {"workbench": workbench})  # noqa: S307 (the package's own record)
+        assert np.array_equal(again.u_probe.values, ds.u_probe.values), call
+
+
 def test_generic_block_is_not_locked_and_p1_on_a_thin_body_warns(tmp_path):
     """The generic block defaults to P2 (its P1 default was ~50 % locked); P1 asked for on a thin generic body
     warns; the paper presets keep the paper's P1 and say nothing."""

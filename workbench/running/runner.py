@@ -320,12 +320,24 @@ def _scene_and_archive(scene, restart, overrides: dict, model):
 
 
 def _call(scene, paths: dict, overrides: dict, options: dict) -> str:
-    """The Python call that makes this result, for the ``history`` attribute (long sequences by their ends)."""
-    given = [] if scene is None else [repr(scene.name if isinstance(scene, (scenes.Scene, PurePath)) else scene)]
+    """The Python call that makes this result, for the ``history`` attribute (long sequences by their ends). A Scene
+    object is written as the call that makes it, with the values it was given (its name alone ran another run)."""
+    given = [] if scene is None else [_scene_call(scene) if isinstance(scene, scenes.Scene)
+                                      else repr(str(scene) if isinstance(scene, PurePath) else scene)]
     given += [f"{k}={results.brief(v)}" for k, v in paths.items() if v is not None]
     given += [f"{k}={results.brief(v)}" for k, v in overrides.items()]
     given += [f"{k}={results.brief(v)}" for k, v in options.items() if v is not None]
     return f"workbench.run({', '.join(given)})"
+
+
+def _scene_call(sc) -> str:
+    """``workbench.scene(NAME or FILE, given values)`` for the Scene ``sc`` (a file's mesh and boundaries are the
+    file's own); its name alone where nothing was given (a built-in scene)."""
+    own = ("mesh", "mesh_digest", "boundaries") if sc.source else ()
+    values = [f"{k}={repr(str(sc[k])) if isinstance(sc[k], Expression) else results.brief(sc[k])}"
+              for k in sorted(sc.set_by_user) if k not in own and k in sc.values]
+    origin = repr(sc.source or sc.name)
+    return f"workbench.scene({', '.join([origin] + values)})" if values or sc.source else origin
 
 
 @contextlib.contextmanager
