@@ -6,6 +6,7 @@ energy of the boundary functional written here, independently of workbench.physi
 whose initial gap is the coordinate function y (the fast path takes it from its own quadrature points).
 """
 import dataclasses
+import re
 
 import numpy as np
 import pytest
@@ -34,6 +35,30 @@ def test_elastic_hertz_2d_in_the_signorini_limit():
         assert r["force"] == pytest.approx(1.0, abs=1e-9)
     assert errors[0] > errors[1] > errors[2] and errors[2] < 0.03  # measured 1.9, 0.83, 0.50 %
     assert _order(hcs, errors) > 0.6  # measured 0.95
+
+
+def test_hertz_profile_compares_only_a_hertz_problem_and_plane_stress_by_its_own_modulus():
+    """``hertz.profile`` read E, nu and the load alone: a run with a Voigt matrix was compared with E's default (51 %
+    "error" on the isotropic run's numbers), a compliant layer and a memory with elastic Hertz, a slab ended in a
+    KeyError and t = 0 in a ZeroDivisionError. Each is refused by name. Plane stress is compared with its own
+    modulus (E* = E; plane strain's is E / (1 - nu^2)), and meets Hertz as plane strain does."""
+    E, nu = 2000.0, 0.3
+    lam, mu = E * nu / ((1 + nu) * (1 - 2 * nu)), E / (2 * (1 + nu))
+    voigt = [[lam + 2 * mu, lam, 0.0], [lam, lam + 2 * mu, 0.0], [0.0, 0.0, mu]]
+    for values, said in ((dict(elastic_tensor=voigt), "elastic tensor is a matrix"),
+                         (dict(gap=0.001, F=10.0, c=1e4), "compliant layer (gap = 0.001, F = 10, c = 10000)"),
+                         (dict(prony=[[-500.0, 0.3, 0.5]]), "relaxation memory")):
+        ds = workbench.run("memory_hertz", h_contact=0.01, progress=False, **values)
+        with pytest.raises(workbench.ParameterError, match=f"^hertz.profile: the run's .*{re.escape(said)}"):
+            hertz.profile(ds)
+    with pytest.raises(workbench.ParameterError, match="it compares a run of hertz, hertz3d"):
+        hertz.profile(workbench.run("memory_slab", h=0.25, T=0.2, progress=False))
+    strain = workbench.run("memory_hertz", h_contact=0.005, progress=False)
+    with pytest.raises(workbench.ParameterError, match=r"the load at t = 0 s is 0: nothing presses"):
+        hertz.profile(strain.isel(time=[0]))
+    stress = hertz.profile(workbench.run("memory_hertz", h_contact=0.005, plane="stress", progress=False))
+    assert stress["a"] == pytest.approx(hertz.cylinder(stress["load"], 1.0, 1000.0, 0.0)[0])
+    assert stress["a_last"] <= stress["a"] <= stress["a_next"] and stress["l2"] < 1.5 * hertz.profile(strain)["l2"]
 
 
 def test_p2_signorini_hertz_archives_its_midpoint_forces():

@@ -67,13 +67,19 @@ def profile(ds, time=None, variable: str = "contact_pressure"):
     within 2 a, by the nodal weights), ``force`` (the contact force over the load's share that the modelled
     part carries), ``x``, ``p``, ``p_hertz`` (by distance from the apex).
     """
+    from ..errors import ParameterError
     from ..expressions import parse
 
     a_ = ds.attrs
     i = -1 if time is None else int(np.argmin(np.abs(ds.time.values - time)))
     t = float(ds.time.values[i])
-    P = float(parse(a_["load"], name="load", allowed=("t",))(t=t))
+    refused = _not_hertz(a_)
+    P = float(parse(a_["load"], name="load", allowed=("t",))(t=t)) if not refused else 0.0
+    if refused or not P > 0:
+        raise ParameterError(f"hertz.profile: {refused or f'the load at t = {t:g} s is {P:g}: nothing presses'}")
     R, E, nu = float(a_["radius"]), float(a_["E"]), float(a_["nu"])
+    if a_.get("plane") == "stress" and "node_z" not in ds.coords:
+        nu = 0.0  # (plane stress: the half-plane's modulus is E itself, E* = E / (1 - nu^2) is plane strain's)
     three = "node_z" in ds.coords
     if three:
         r = np.hypot(ds.node_x.values, ds.node_y.values)
@@ -107,3 +113,22 @@ def profile(ds, time=None, variable: str = "contact_pressure"):
             "a_next": float(r[~touching & (r > 0)].min()) if (~touching).any() else float("nan"),
             "l2": float(np.sqrt(np.sum(w[near] * (p - ph)[near] ** 2) / np.sum(w[near] * ph[near] ** 2))),
             "force": float(np.sum(w * p) / share), "x": r, "p": p, "p_hertz": ph}
+
+
+def _not_hertz(attrs) -> str:
+    """Why a run's archive is no Hertz problem that :func:`profile` can compare ("" where it is one): the body (a
+    half-disc or a hemisphere), the material (E and nu, not a matrix), a rigid foundation (Model B's layer of
+    thickness gap with F and c), and no memory (Lee-Radok's ``lee_radok`` for a Kelvin-Voigt body)."""
+    if attrs.get("geometry") not in ("halfdisc", "hemisphere") or "load" not in attrs:
+        return (f"the run is of scene {attrs.get('scene', '?')!r} ({attrs.get('geometry', '?')}): it compares a run "
+                "of hertz, hertz3d, memory_hertz or memory_hertz3d")
+    if attrs.get("elastic_tensor", "[]") not in ("[]", "", "()"):
+        return "the run's elastic tensor is a matrix (elastic_tensor): Hertz's pressure is that of E and nu"
+    layer = {k: float(attrs.get(k, 0.0)) for k in ("gap", "F", "c")}
+    if any(layer.values()):
+        return (f"the run's foundation is a compliant layer ({', '.join(f'{k} = {v:g}' for k, v in layer.items())}): "
+                "Hertz's pressure is that of a rigid one (gap = F = c = 0)")
+    if attrs.get("prony", "[]") not in ("[]", "", "()") or attrs.get("kernel", "0") not in ("0", ""):
+        return "the run's body has a relaxation memory (prony, kernel): Hertz's pressure is an elastic body's"
+    return ""
+
