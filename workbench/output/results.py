@@ -297,12 +297,14 @@ class Recorder:
                                 "beta")
         for key, vals in self.extra.items():
             data[key] = _var("time", np.asarray(vals), key)
+        # (no record at all: a run continued on a finer mesh that stopped at its first step)
         for key, arrs in self.node_extra.items():
-            data[key] = _var(("time", "node"), np.stack(arrs), key)
+            data[key] = _var(("time", "node"), np.stack(arrs) if arrs else np.empty((0, len(d.node_dofs))), key)
         for key, values in self.points.items():
             coords[key] = _var("midpoint", values, key)
+        midpoints = len(next(iter(self.points.values()))) if self.points else 0
         for key, arrs in self.point_extra.items():
-            data[key] = _var(("time", "midpoint"), np.stack(arrs), key)
+            data[key] = _var(("time", "midpoint"), np.stack(arrs) if arrs else np.empty((0, midpoints)), key)
         if self.snaps:
             self._snapshot_variables(coords, data)
         return xr.Dataset(data, coords=coords, attrs=attrs)
