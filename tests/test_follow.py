@@ -188,6 +188,19 @@ def test_error_control_on_a_kelvin_voigt_body_goes_on_after_a_refinement():
     assert float(ds.time[-1]) == pytest.approx(0.3) and int(ds.ndof[-1]) > int(ds.ndof[0])
 
 
+@pytest.mark.parametrize("adapt", ["repeat", "during"])
+def test_an_adapted_archive_has_units_and_a_long_name_on_every_variable(adapt):
+    """level, level_ndof, level_space_error_estimate, ndof(time) of the repeated loop had no attributes, its
+    level_wall_time no long_name, the refinement coordinate of a run that follows its solution none, and Model B's
+    state_histories and state_lam no units; only the meshes' own variables go without units (docs/conventions.md)."""
+    ds = workbench.run("memory_slab", h=0.25, T=0.2, space_tol=0.1, space_adapt=adapt, progress=False)
+    meshes = {"mesh", "snapshot_mesh", "adapted_mesh"}
+    for name, var in ds.variables.items():
+        assert var.attrs.get("long_name"), name
+        assert "units" in var.attrs or name in meshes, name
+    assert ds.state_histories.attrs["units"] == "m s" and ds.state_lam.attrs["units"] == "N"
+
+
 def test_max_dofs_stops_the_refinement_with_a_warning():
     """A refinement that would exceed max_dofs is not made: the run goes on on its mesh and says so."""
     with pytest.warns(RuntimeWarning, match=r"space_tol = 0.05 not met: .* \(max_dofs reached\)"):

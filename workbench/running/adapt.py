@@ -219,12 +219,13 @@ def _stop(levels: list, numerics) -> str:
 def _with_levels(ds: xr.Dataset, levels: list, stop: str, body) -> xr.Dataset:
     ndof, estimate, wall = (np.array(column) for column in zip(*levels))
     level = np.arange(len(levels))
-    ds = ds.assign_coords(level=("level", level))
-    ds["level_ndof"] = ("level", ndof.astype(np.int64))
-    ds["level_space_error_estimate"] = ("level", estimate)
-    ds["level_wall_time"] = ("level", wall)
-    ds["ndof"] = ("time", np.full(ds.sizes["time"], ndof[-1], dtype=np.int64))
-    ds["level_wall_time"].attrs["units"] = "s"
+    ds = ds.assign_coords(level=("level", level, {"units": "1", "long_name": "mesh of the adaptive loop (0: given)"}))
+    ds["level_ndof"] = ("level", ndof.astype(np.int64), {"units": "1", "long_name": "dofs of each mesh"})
+    ds["level_space_error_estimate"] = ("level", estimate, {"units": "1", "long_name": "relative energy error "
+                                                            "estimate of the run on each mesh"})
+    ds["level_wall_time"] = ("level", wall, {"units": "s", "long_name": "wall time of the run on each mesh"})
+    ds["ndof"] = ("time", np.full(ds.sizes["time"], ndof[-1], dtype=np.int64),
+                  {"units": "1", "long_name": "dofs of the mesh the record was made on"})
     if len(levels) > 1:  # (the final mesh, to compare the run with others on theirs: geometry.of_run)
         ds["adapted_mesh"] = ((), to_text(body.adapted_mesh), {"long_name": "the adapted mesh (netgen .vol text)"})
     # (the meshes before the final one count as its setup: a study's cost, setup + time loop, is the whole loop's)

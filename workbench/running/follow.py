@@ -349,7 +349,7 @@ def merge(segments: list, follow: Follow, job) -> xr.Dataset:
                                 "displacement dofs of the mesh each snapshot was made on (carried onto the final mesh)"})
         out = _snapshot_meshes(out, segments, follow)
     times, dofs = (list(c) for c in zip(*follow.refinements)) if follow.refinements else ([], [])
-    out = out.assign_coords(refinement=("refinement", np.arange(len(times))))
+    out = out.assign_coords(refinement=("refinement", np.arange(len(times)), {"units": "1", "long_name": "refinement"}))
     out["refinement_time"] = ("refinement", np.array(times, dtype=float), {"units": "s", "long_name":
                               "the time each refinement went back to (the last estimate time that met space_tol on "
                               "the coarser mesh), from where the run went on on the finer mesh"})

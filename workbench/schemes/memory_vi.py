@@ -102,11 +102,11 @@ class MemoryVI(ErrorControlled, Scheme):
     #: in the serial order where the contact problem is solved ("root").
     distributed_layout = {"histories": "dof", "stored": "dof", "states": "root", "lam": "root"}
     state_variables = {
-        "histories": ("", "restart state: memory histories H_i (vi), dof vectors"),
+        "histories": ("m s", "restart state: memory histories H_i = int e^(-(t-s)/tau_i) u(s) ds (vi), dof vectors"),
         "times": ("s", "restart state: times of the stored steps (vi, general kernel)"),
         "stored": ("m", "restart state: stored displacement dofs u_j (vi, general kernel)"),
         "states": ("1", "restart state: contact node states (vi): 0 separated, 1 stuck, 2 compliant, 3 rigid"),
-        "lam": ("", "restart state: contact node forces (vi)"),
+        "lam": ("N", "restart state: contact node forces (vi; per unit thickness in 2D, N/m)"),
     }
 
     def __init__(self, d):
