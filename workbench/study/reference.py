@@ -32,6 +32,7 @@ A case is never its own reference.
 from __future__ import annotations
 
 import json
+import warnings
 from typing import Protocol, runtime_checkable
 
 import numpy as np
@@ -262,6 +263,11 @@ def make(spec, scene, cases, axes, layout=None):
                     values[name] = float(spec[name])
                 except (TypeError, ValueError):
                     raise ParameterError(f"reference: {name} = {spec[name]!r} is not a number") from None
+        coarser = [f"{name} = {values[name]:g} (the cases' finest: {min(getattr(c, name) for c in cases):g})"
+                   for name in ("h", "k") if name in spec and values[name] > min(getattr(c, name) for c in cases)]
+        if coarser and not values.get("rtol", 0.0):  # (a reference coarser than a case measures its own error)
+            warnings.warn(f"reference: {', '.join(coarser)} is coarser than cases it is compared with: their errors "
+                          "are then the reference's; give a finer run", RuntimeWarning, stacklevel=4)
         ref = RunReference(cases, values, listed=True, describe=json.dumps(values, sort_keys=True, default=str))
         for c in ref.cases():
             scene.with_(**c.values())  # checked before any work
