@@ -97,7 +97,9 @@ def test_figures_say_what_they_show(tmp_path):
     for draw, wrong, said in ((plotting.overview, study, "the Dataset is a study's"),
                               (plotting.convergence, tp2, "the Dataset is a run's"),
                               (plotting.pareto, tp2, "the Dataset is a run's"), (plotting.tolerance, tp2, "a run's"),
-                              (plotting.overview, "tp2.nc", "give the xarray Dataset of a run, got str")):
+                              (plotting.overview, "tp2.nc", "give the xarray Dataset of a run, got str"),
+                              (plotting.space, tp2, "the run is not adapted"),
+                              (plotting.tolerance, study, "the study has no rtol axis")):
         with pytest.raises(workbench.ParameterError, match=f"^plotting.{draw.__name__}: .*{said}"):
             draw(wrong)
 

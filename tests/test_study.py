@@ -107,6 +107,12 @@ def test_pareto_and_cheapest():
     best = st.cheapest(float(ds.error.max()) * 1.01)
     assert best is not None and best["error"] <= float(ds.error.max()) * 1.01
     assert st.cheapest(1e-30) is None
+    # a tolerance below 0 (or NaN) gave None as if no case met it; error_probe took a case for one probe's error
+    for tolerance in (-1.0, float("nan")):
+        with pytest.raises(workbench.ParameterError, match=r"tolerance = .*: give a number >= 0"):
+            st.cheapest(tolerance)
+    with pytest.raises(workbench.ParameterError, match=r"'error_probe' has the dimension\(s\) \['probe'\]"):
+        st.cheapest(1.0, error="error_probe")
 
 
 def _study_cmd(out):

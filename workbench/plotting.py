@@ -225,7 +225,10 @@ def tolerance(study_ds, path=None, error="error", cost="wall_time"):
     error = rtol, 0.1 rtol and 10 rtol), and the cost against the achieved error, one line per other case."""
     _of_kind(study_ds, True, "tolerance")
     if "rtol" not in study_ds.dims:
-        raise ValueError("tolerance plots need a study with an rtol axis (sweep={'rtol': [...]})")
+        from .errors import ParameterError
+
+        raise ParameterError("plotting.tolerance: the study has no rtol axis: it draws a sweep of tolerances "
+                             "(sweep={'rtol': [...]})")
     rtol = study_ds.rtol.values
     err_all = study_ds[error]
     c_all = study_ds[cost] + (study_ds["setup_time"] if cost == "wall_time" else 0)
@@ -323,8 +326,12 @@ def space(ds, path=None):
     >>> [ax.get_title() for ax in fig.axes]
     ['estimate in space', 'dofs over time']
     """
+    _of_kind(ds, False, "space")
     if "space_error_estimate" not in ds:
-        raise ValueError("space plots need a run with space_tol > 0 (its space_error_estimate)")
+        from .errors import ParameterError
+
+        raise ParameterError("plotting.space: the run is not adapted: it draws a run with space_tol > 0 (its "
+                             "space_error_estimate)")
     tol = float(ds.attrs.get("space_tol", np.nan))
     fig, (left, right) = figure(1, 2, figsize=(9, 3.6))
     t, e = ds.time.values, ds.space_error_estimate.values

@@ -404,8 +404,12 @@ def cheapest(ds: xr.Dataset, tolerance: float, *, error: str = "error", cost: st
         if name not in ds:
             raise ParameterError(f"cheapest: {name!r} is not a variable of the study (errors: "
                                  f"{', '.join(n for n in ds.data_vars if str(n).startswith('error'))})")
-    if isinstance(tolerance, bool) or not isinstance(tolerance, (int, float)):
-        raise ParameterError(f"cheapest: tolerance = {tolerance!r}: give a number")
+    if isinstance(tolerance, bool) or not isinstance(tolerance, (int, float)) or not tolerance >= 0:
+        raise ParameterError(f"cheapest: tolerance = {tolerance!r}: give a number >= 0")
+    extra = [d for d in ds[error].dims if d not in ds["wall_time"].dims]
+    if extra:  # (error_probe: a case would be taken for one probe's error alone)
+        raise ParameterError(f"cheapest: {error!r} has the dimension(s) {extra} beyond the cases' (a case would be "
+                             "taken for one of them alone): give a case's error, such as 'error'")
     err = ds[error]
     c = ds[cost] + (ds["setup_time"] if cost == "wall_time" else 0)
     ok = (err <= tolerance) & np.isfinite(c)
