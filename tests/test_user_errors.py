@@ -914,6 +914,13 @@ def test_misspelt_run_option_is_offered_the_option():
     assert "progres" in msg and "'progress'" in msg and "'probes'" not in msg, msg
 
 
+def test_points_given_as_a_numpy_array_are_points():
+    """probes=np.array([[0.5, 0.05]]) was refused ("expected a list of coordinate tuples") where a NumPy
+    elastic_tensor is taken: an array of points is read as its rows."""
+    assert workbench.scene("slab", probes=np.array([[0.5, 0.05], [1.0, 0.1]]))["probes"] == ((0.5, 0.05), (1.0, 0.1))
+    assert workbench.scene("tp1", probes=np.array([[0.5]]))["probes"] == ((0.5,),)
+
+
 @pytest.mark.parametrize("scene, key, value", [
     ("slab", "probes", "(0.5,)"),
     ("slab", "probes", "[[0.5]]"),

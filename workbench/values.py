@@ -167,7 +167,7 @@ def _points(name, value):
             except ValueError:
                 raise ParameterError(f"{name} = {text!r}: give points as '(x, y); (x, y)' or a JSON list") from None
     try:
-        pts = tuple(tuple(float(c) for c in (p if isinstance(p, (list, tuple)) else [p])) for p in value)
+        pts = tuple(tuple(float(c) for c in (p if isinstance(p, (list, tuple, np.ndarray)) else [p])) for p in value)
     except (TypeError, ValueError):
         raise ParameterError(f"{name} = {value!r}: expected a list of coordinate tuples") from None
     if any(not math.isfinite(c) for p in pts for c in p):
