@@ -472,7 +472,7 @@ def _check_consistency(name, body, v, model="A"):
         raise ParameterError(f"edge_tol = {v['edge_tol']:g} is judged by a mesh that follows the run: give space_tol > "
                              "0 (the energy's tolerance, e.g. 0.2) and space_adapt = 'during', or leave edge_tol = 0")
     steps = v["T"] / v["k"]
-    if steps > MAX_STEPS and not v.get("rtol", 0.0) > 0:  # (under error control k is the first step alone)
+    if steps > MAX_STEPS and not is_adaptive(v.get("rtol", 0.0)):  # (under error control k is the first step alone)
         raise ParameterError(f"k = {v['k']:g} and T = {v['T']:g} make {steps:.3g} time steps; at most {MAX_STEPS:.0e} "
                              "are allowed (check the values of k and T)")
     if v["h"] > body.size and "mesh" not in v:  # (a mesh body's h is its longest cell edge: a diagonal may exceed it)

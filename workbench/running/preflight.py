@@ -23,7 +23,7 @@ import numpy as np
 
 from ..discrete import pardiso
 from ..errors import ParameterError
-from ..input.numerics import may_iterate
+from ..input.numerics import ADAPT, CONTROL, is_adaptive, may_iterate
 
 
 @dataclass(frozen=True)
@@ -161,11 +161,11 @@ def warnings_for(scene, model) -> list:
 
 
 #: Parameters that act only with another: (the parameters, whether that other acts, what it is).
-_ONLY_WITH = ((("atol", "k_min", "k_max"), lambda v: v["rtol"] > 0, "rtol > 0 (error-controlled steps)"),
+_ONLY_WITH = ((CONTROL[1:], lambda v: is_adaptive(v["rtol"]), "rtol > 0 (error-controlled steps)"),
               (("gamma_nu", "eps_a", "L", "beta0", "c_tau", "bonding_truncation"), lambda v: v.get("adhesion", False),
                "adhesion = true"),
-              (("max_dofs", "space_adapt", "space_goal"), lambda v: v.get("space_tol", 0.0) > 0,
-               "space_tol > 0 (adaptive meshes)"))
+              (tuple(n for n in ADAPT if n not in ("space_tol", "edge_tol")),  # (edge_tol: refused alone)
+               lambda v: v.get("space_tol", 0.0) > 0, "space_tol > 0 (adaptive meshes)"))
 
 
 def _unused(scene) -> list:
