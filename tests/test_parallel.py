@@ -78,6 +78,7 @@ def test_a_distributed_run_equals_the_serial_run(tmp_path, n, scene, values):
     mpi = workbench.load(out)
     serial = workbench.run(scene, progress=False, **values)
     assert mpi.attrs["status"] == "complete" and mpi.attrs["mpi_processes"] == n
+    assert mpi.attrs["history"].split(" ", 1)[1].startswith(f"mpiexec -n {n} workbench run ")  # (the whole command)
     assert mpi.attrs["linear_solver"] == values.get("solver", "cg") and mpi.attrs["ndof"] == serial.attrs["ndof"]
     assert mpi.attrs["nsteps"] == serial.attrs["nsteps"]
     assert set(serial.variables) == set(mpi.variables) - {"cg_iterations"}  # (one process: a factor)

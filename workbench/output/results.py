@@ -426,7 +426,8 @@ def provenance(scene, extra: dict, call: str = "", terms=None) -> dict:
             attrs[f"{k}_units"] = unit
     attrs |= versions()
     stamp = datetime.now(timezone.utc).strftime("%Y-%m-%dT%H:%M:%SZ")
-    attrs["history"] = f"{stamp} {invocation.get() or call or 'workbench.run(' + repr(scene.name) + ')'}"
+    launcher = f"mpiexec -n {extra['mpi_processes']} " if int(extra.get("mpi_processes", 1)) > 1 else ""
+    attrs["history"] = f"{stamp} {launcher}{invocation.get() or call or 'workbench.run(' + repr(scene.name) + ')'}"
     return attrs
 
 
