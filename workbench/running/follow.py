@@ -188,6 +188,10 @@ class Carried:
     def state_for(self, disc, scheme) -> dict:
         return carry(self.state, self.coarse, (disc, scheme))
 
+    def settle(self, scheme) -> None:
+        """The carried state solved again where the scheme needs it on the finer mesh (:meth:`Scheme.settle`)."""
+        scheme.settle(self.time)
+
     def provenance(self, attrs: dict) -> dict:
         """The costs of all meshes so far (setup, time loop, CPU) summed; where the run was continued from, kept."""
         old, out = self.archive.attrs, dict(attrs)

@@ -283,6 +283,10 @@ class _Resume:
         """The state to restore in ``scheme`` on ``disc`` (the archive's own)."""
         return self.state
 
+    def settle(self, scheme) -> None:
+        """(an archive's state is continued as it is)"""
+        return None
+
     def provenance(self, attrs: dict) -> dict:
         return restarts.provenance(attrs, self.archive, self.path, self.state["time"])
 
@@ -394,6 +398,7 @@ class _Run:
         if self.resume is not None:
             restarts.restore(self.resume.state_for(disc, scheme), disc, scheme, self.steps, self.recorder,
                              self.resume.archive)
+            self.resume.settle(scheme)
         origin = f"limit = {limit:g} m, as given" if limit is not None else \
             "10 x the body's largest extent, the default limit"
         limit = limit if limit is not None else 10.0 * self.model.geometry.size

@@ -178,6 +178,11 @@ class Scheme:
         if "cache" in state:  # (a rollback within the run keeps the factorisations it has)
             self._restore_cache(state["cache"])
 
+    def settle(self, t: float) -> None:
+        """After a state was carried onto a finer mesh at ``t`` (:func:`workbench.running.follow.carry`): solve again
+        there what the finer mesh would have had at t (default: nothing, the carried state is taken as it is)."""
+        return None
+
     def _extra_state(self) -> dict:
         """What else the scheme keeps between steps (copies)."""
         return {}

@@ -98,6 +98,21 @@ class MemoryRule:
                 self.combined += self.scales[i] * vectors[i]
             self._add_matvec(K, self.combined, out)
 
+    def held(self) -> np.ndarray:
+        """sum_i s_i K_i H_i of the histories as they stand: the rectangle rule's memory at the last accepted t_n
+        (which holds no u_n part)."""
+        out = np.zeros(self.d.ndof)
+        self.apply(self.histories, out)
+        return out
+
+    def error_force(self, k: float, history: list, u: np.ndarray) -> np.ndarray:
+        """The rule's error force over the last step (:meth:`error_terms` through the stiffnesses), 0 on the
+        Dirichlet dofs."""
+        force = np.zeros(self.d.ndof)
+        self.apply(self.error_terms(k, history, u), force)
+        force[self.d.dirichlet_dofs] = 0.0
+        return force
+
     def _add_matvec(self, K, H, out):
         self.tmp.FV().NumPy()[:] = H
         self.work.data = K.mat * self.tmp

@@ -180,7 +180,7 @@ class MemoryVI(ErrorControlled, Scheme):
             schur = SchurOperator(x.proxy(solver), x.view.ndof, nodes.C, nodes.sign, diagonal, nodes.B, True) \
                 if x.solves else None
         else:
-            S_inv = x.run(lambda: self._condense(solver), solver)
+            S_inv = x.run(lambda: _condensed(x, nodes, solver), solver)
         if x.solves:
             # z = s + rho lam / S_ii-scaled: the prox scale from the body's own stiffness. A large factor predicts the
             # states from the contact force (measured: factor 1 cycles on memory_slab, 10 and 100 settle)
@@ -190,15 +190,10 @@ class MemoryVI(ErrorControlled, Scheme):
         kept = self.candidates.operator(solver) if keep else None
         return MemoryOperator(M, solver, split=split, kept=kept, S_inv=S_inv, rho=rho, schur=schur)
 
-    def _condense(self, solver):
-        """The dense contact stiffness S^-1 = (B K^-1 B^T)^-1, one back-substitution per contact point."""
-        return CondensedSystem(self.exchange.proxy(solver), self.exchange.view.ndof, self.nodes.C,
-                               B=self.nodes.B).S0_inv  # (P1: sign^2 = 1)
-
     def _condensed_fallback(self):
         """(S_inv, rho) of the current operator for the condensed solver, built once (the coupled solve's fallback)."""
         op = self._op
-        self.S_inv = op.S_inv = op.S_inv if op.S_inv is not None else self._condense(self.solver)
+        self.S_inv = op.S_inv = op.S_inv if op.S_inv is not None else _condensed(self.exchange, self.nodes, self.solver)
         return self.S_inv, 100.0 / np.diag(self.S_inv)  # (the condensed solver's own scale; the coupled one keeps its)
 
     # -- steps ----------------------------------------------------------------------------------------------------
@@ -308,12 +303,8 @@ class MemoryVI(ErrorControlled, Scheme):
             return 0.0
         if len(self.history) < (2 if self.trapezoid else 1):
             return None
-        u = d.u.vec.FV().NumPy()
-        force = np.zeros(d.ndof)
-        self.memory.apply(self.memory.error_terms(self.k_last, self.history, u), force)
-        force[d.dirichlet_dofs] = 0.0
-        du = np.zeros(d.ndof)
-        self.solver.solve(force, du)
+        u, du = d.u.vec.FV().NumPy(), np.zeros(d.ndof)
+        self.solver.solve(self.memory.error_force(self.k_last, self.history, u), du)
         world = d.world
         return float(world.max(np.abs(du).max(initial=0.0)) / (atol + rtol * max(self.u_scale,
                                                                                  world.max(np.abs(u).max(initial=0.0)))))
@@ -329,6 +320,15 @@ class MemoryVI(ErrorControlled, Scheme):
             if x.solves else None
         return x.share(theta), 0.0
 
+    def settle(self, t: float) -> None:
+        """u_n solved again at t on the finer mesh with the memory carried onto it (rectangle rule: its memory at t_n
+        holds no u_n). The next step's estimate reads u_n: the coarse mesh's, it charged the step with the jump onto
+        the finer mesh, which the memory integrates over the step, and no step size removed it (k cut to k_min)."""
+        if self.trapezoid or not self.history or self.history[-1][0] != t:
+            return
+        self._equilibrium(t, self.memory.held() if self.memory is not None else np.zeros(self.d.ndof))
+        self.history[-1] = (t, self.d.u.vec.FV().NumPy().copy(), None)
+
     def _extra_state(self) -> dict:
         memory = self.memory.state() if self.memory is not None else {"histories": []}
         nodes = self.nodes.state() if self.nodes is not None else {}  # (held where the contact problem is solved)
@@ -343,6 +343,11 @@ class MemoryVI(ErrorControlled, Scheme):
 
     def observer(self, disc=None) -> "MemoryObserver":
         return MemoryObserver(self, disc or self.d)
+
+
+def _condensed(exchange, nodes, solver):
+    """The dense contact stiffness S^-1 = (B K^-1 B^T)^-1, one back-substitution per contact point."""
+    return CondensedSystem(exchange.proxy(solver), exchange.view.ndof, nodes.C, B=nodes.B).S0_inv  # (P1: sign^2 = 1)
 
 
 class MemoryObserver(Observer):
