@@ -956,6 +956,23 @@ def test_a_value_that_acts_only_with_another_that_is_off_is_warned_about(scene, 
         workbench.run(scene, progress=False, **on)
 
 
+@pytest.mark.parametrize("scene, values, made", [
+    ("tp3", dict(h=0.25, T=0.02, omega=5.0), dict(delta="0.05*t")),
+    ("hertz", dict(h=0.5, T=0.02, tau=0.2), dict(a1=1.0, a2=2.0)),
+])
+def test_a_presets_own_value_that_only_makes_values_given_too_is_warned_about(scene, values, made):
+    """tp3's omega makes its delta, the Hertz scenes' tau their viscosity a1, a2: given with those, it was ignored
+    without a word. A warning names it; given alone (it makes them), none."""
+    name = next(iter(set(values) - {"h", "T"}))
+    with pytest.warns(RuntimeWarning, match=re.escape(f"{name} = {values[name]} has no effect with "
+                                                      f"{', '.join(made)} given")):
+        workbench.run(scene, progress=False, **values, **made)
+    with warnings.catch_warnings():
+        warnings.simplefilter("error", RuntimeWarning)
+        ds = workbench.run(scene, progress=False, **values)
+    assert ds.attrs["status"] == "complete"
+
+
 @pytest.mark.parametrize("scene, values", [
     ("hertz", dict(h=0.25, T=0.04, probes=((0.0, 0.5), (0.9, 0.1)))),  # (a half-disc: its box's corner)
     ("hertz3d", dict(h=0.5, T=0.04, probes=((0.9, 0.9, 0.1),))),

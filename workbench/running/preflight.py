@@ -157,7 +157,7 @@ def warnings_for(scene, model) -> list:
         out.append(f"{scene.name}: P1 elements on a thin body (thickness / length = {g.aspect():.2g}) lock in bending, "
                    "so displacements come out too small (the block at h = 0.05: 50 %; the slab at h = 0.0125: 5 %); "
                    "order = 2 converges at the same cost")
-    return out + _contact_zone(scene, g) + _quadrature_cost(scene, model) + _unused(scene)
+    return out + _contact_zone(scene, g) + _quadrature_cost(scene, model) + _unused(scene) + _underived(scene)
 
 
 #: Parameters that act only with another: (the parameters, whether that other acts, what it is).
@@ -178,6 +178,20 @@ def _unused(scene) -> list:
             out.append(f"{scene.name}: {', '.join(f'{n} = {scene[n]}' for n in given)} "
                        f"{'has' if len(given) == 1 else 'have'} no effect without {what}")
     return out
+
+
+def _underived(scene) -> list:
+    """A preset's own parameter that only makes values the user gave as well (tp3's omega with a delta given, the
+    Hertz scenes' tau with a1 and a2 given), which was ignored without a word."""
+    from ..input.scenes import PRESETS
+
+    preset = PRESETS.get(scene.base)
+    if preset is None or preset.derive is None or not set(preset.derive(scene.values)) <= scene.set_by_user:
+        return []
+    given = [n for n in preset.extras if n in scene.set_by_user]
+    made = ", ".join(preset.derive(scene.values))
+    return [f"{scene.name}: {n} = {scene[n]} has no effect with {made} given (it only makes the preset's {made})"
+            for n in given]
 
 
 #: Seconds per (step x stored step x displacement dof) of the quadrature memory (the rod, ndof 21: 10 s for 1e4
