@@ -299,10 +299,12 @@ def test_study_axis_values_are_checked():
         Study("tp1", k=[0.1, 0.05], sweep={"c_nu": [1, 1.0]})
 
 
-def test_every_coordinate_of_a_study_has_units_and_a_long_name(tmp_path):
+@pytest.mark.parametrize("reference, ks", [("exact", [0.1, 0.05]), ("extrapolated", [0.1, 0.05, 0.025])])
+def test_every_coordinate_of_a_study_has_units_and_a_long_name(tmp_path, reference, ks):
     """As a run's archive has them (CF): order, scheme, probe, probe_x, norm, along and a swept parameter's axis had
-    none; a swept parameter's come from the parameter table. Kept through the archive."""
-    ds = Study("tp1", k=[0.1, 0.05], sweep={"gamma_nu": [0.1, 0.2]}, reference="exact", workers=0).run(progress=False)
+    none; a swept parameter's come from the parameter table. Kept through the archive. (The extrapolated reference
+    fits the orders again, and its norm and along had lost theirs.)"""
+    ds = Study("tp1", k=ks, sweep={"gamma_nu": [0.1, 0.2]}, reference=reference, workers=0).run(progress=False)
     back = workbench.load(workbench.write(ds, tmp_path / "s.nc"))
     for name, coord in back.coords.items():
         assert coord.attrs.get("long_name") and "units" in coord.attrs, name
@@ -500,6 +502,21 @@ def test_a_reference_run_takes_the_most_accurate_value_of_what_the_cases_differ_
     with pytest.warns(RuntimeWarning, match=r"the cases differ in contact_solver \(the reference takes 'condensed'\)"):
         Study("memory_slab", h=0.25, k=[0.1, 0.05], T=0.2, sweep={"contact_solver": ["condensed", "coupled"]},
               reference={"k": 0.01}, workers=0)
+
+
+def test_an_extrapolated_reference_that_gives_no_estimate_says_so():
+    """Model B's trapezoid rule at rtol 1e-2 and 1e-3 takes nearly the same steps: the differences between levels
+    rise, the extrapolation gives no estimate, and the study returned NaN errors and an empty plot without a word.
+    It warns now, naming the differences and a finer run to give instead; a series that converges does not warn."""
+    with pytest.warns(RuntimeWarning, match=r"no error estimate for 1 series: the differences between their levels "
+                                            r"of rtol do not fall \(.*\{'rtol': 1e-05\} or 'finest'"):
+        ds = Study("memory_slab", h=0.25, T=0.3, memory_rule="trapezoid", sweep={"rtol": [1e-2, 1e-3, 1e-4]},
+                   workers=0).run(progress=False)
+    assert np.isnan(ds.error.values).all() and (ds.complete == 1).all()
+    with warnings.catch_warnings():
+        warnings.simplefilter("error", RuntimeWarning)
+        ds = Study("tp1", h=0.25, k=[0.04, 0.02, 0.01], T=0.4, reference="extrapolated", workers=0).run(progress=False)
+    assert np.isfinite(ds.error.values).all()
 
 
 def test_a_finer_run_reference_of_a_tolerance_sweep_takes_fixed_steps():

@@ -145,7 +145,12 @@ def dataset(layout: Layout, rows: dict, n_probe: int, probe_coords: dict, dim: i
     ds["observed_order_stderr"] = spread
     ds["pareto"] = (dims, pareto_front(ds["error"].values, (ds["wall_time"] + ds["setup_time"]).values),
                     {"units": "1", "long_name": "1 if no other case is both cheaper and more accurate"})
-    for name in ds.coords:  # (long_name and units on every coordinate, as a run's archive has them)
+    return _labelled(ds)
+
+
+def _labelled(ds: xr.Dataset) -> xr.Dataset:
+    """``ds`` with long_name and units on every coordinate that has none, as a run's archive has them."""
+    for name in ds.coords:
         if not ds[name].attrs:
             ds[name].attrs.update(_coordinate_attrs(name))
     return ds
@@ -366,6 +371,7 @@ def extrapolate(ds: xr.Dataset, layout: Layout, ref) -> None:
     dim = "level" if layout.refining else ref.driver
     x = np.asarray(ds[ref.driver].values if dim == "level" else ds[dim].values, dtype=float)
     order = np.argsort(-x)  # coarse first
+    none = []  # (the series of "error" that give no estimate, by their driver's differences)
     for name in list(NORMS) + ["error_probe"]:
         da = ds[name].transpose(dim, ...)
         d = np.moveaxis(da.values, 0, -1)[..., order]
@@ -374,10 +380,10 @@ def extrapolate(ds: xr.Dataset, layout: Layout, ref) -> None:
         for index in np.ndindex(d.shape[:-1]):
             diffs = d[index][:-1]
             ok = np.isfinite(diffs) & (diffs > 0)
-            if ok.sum() < 2:
-                continue
-            p = np.polyfit(np.log(xs[:-1][ok]), np.log(diffs[ok]), 1)[0]
+            p = np.polyfit(np.log(xs[:-1][ok]), np.log(diffs[ok]), 1)[0] if ok.sum() >= 2 else np.nan
             if not p > 0:
+                if name == "error" and np.isfinite(diffs).any():
+                    none.append(", ".join(f"{v:.3g}" for v in diffs))
                 continue
             r = xs[1:] / xs[:-1]
             e[index][:-1] = diffs / (1.0 - r ** p)
@@ -385,9 +391,19 @@ def extrapolate(ds: xr.Dataset, layout: Layout, ref) -> None:
         back = np.empty_like(e)
         back[..., order] = e
         ds[name].values = _restore(back, da, ds[name].dims)
+    if none:  # (NaN errors and no order, which a plot showed as an empty panel without a word)
+        import warnings
+
+        warnings.warn(f"reference: the extrapolated reference gives no error estimate for {len(none)} series: the "
+                      f"differences between their levels of {ref.driver} do not fall ({'; '.join(none[:3])}"
+                      f"{'; ...' if len(none) > 3 else ''}; error-controlled runs of neighbouring tolerances may take "
+                      "the same steps); give a finer run as the reference, such as {'"
+                      f"{ref.driver}': {float(x.min()) / (4 if ref.driver in ('h', 'k', 'h_contact') else 10):g}}} or 'finest'",
+                      RuntimeWarning, stacklevel=4)
     orders, spread = fit(ds, layout)
     ds["observed_order"] = orders
     ds["observed_order_stderr"] = spread
+    _labelled(ds)  # (the orders fitted again brought their norm and along without attributes)
     ds["pareto"] = (layout.dims, pareto_front(ds["error"].values, (ds["wall_time"] + ds["setup_time"]).values),
                     ds["pareto"].attrs)
 
