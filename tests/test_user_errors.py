@@ -921,6 +921,19 @@ def test_points_given_as_a_numpy_array_are_points():
     assert workbench.scene("tp1", probes=np.array([[0.5]]))["probes"] == ((0.5,),)
 
 
+@pytest.mark.parametrize("value", ["none", "None", None, ""])
+def test_an_empty_list_typed_as_the_table_shows_it_is_taken(value):
+    """The parameter table shows prony's empty default as "none"; typed back (``--set prony=none``, ``prony=None``)
+    it was refused with a message about points ("give points as '(x, y); (x, y)'"). It is the empty list now, for
+    every list-valued parameter; a list that cannot be read says tuples."""
+    assert workbench.scene("memory_rod", prony=value)["prony"] == ()
+    assert workbench.scene("tp1", snapshots=value)["snapshots"] == ()
+    assert workbench.scene("slab", elastic_tensor=value)["elastic_tensor"] == ()
+    with pytest.raises(ParameterError, match=r"prony = 'nothing': give tuples as '\(a, b\); \(c, d\)' or a JSON "
+                                             r"list, or none"):
+        workbench.scene("memory_rod", prony="nothing")
+
+
 @pytest.mark.parametrize("scene, key, value", [
     ("slab", "probes", "(0.5,)"),
     ("slab", "probes", "[[0.5]]"),

@@ -88,6 +88,8 @@ class Param:
                              size=(1 if self.kind == "expr" else size))
             except ExpressionError as err:
                 raise ParameterError(str(err)) from None
+        if self.kind in ("points", "times", "matrix") and (value is None or str(value).strip().lower() in ("", "none")):
+            return ()  # (the parameter table shows an empty default as "none": the same value typed back)
         if self.kind == "points":
             return _points(name, value)
         if self.kind == "times":
@@ -165,11 +167,12 @@ def _points(name, value):
                 value = [[float(c) for c in p.strip().strip("()[]").split(",") if c.strip()]
                          for p in text.split(";") if p.strip()]
             except ValueError:
-                raise ParameterError(f"{name} = {text!r}: give points as '(x, y); (x, y)' or a JSON list") from None
+                raise ParameterError(f"{name} = {text!r}: give tuples as '(a, b); (c, d)' or a JSON list, or none") \
+                    from None
     try:
         pts = tuple(tuple(float(c) for c in (p if isinstance(p, (list, tuple, np.ndarray)) else [p])) for p in value)
     except (TypeError, ValueError):
-        raise ParameterError(f"{name} = {value!r}: expected a list of coordinate tuples") from None
+        raise ParameterError(f"{name} = {value!r}: expected a list of tuples of numbers, or none") from None
     if any(not math.isfinite(c) for p in pts for c in p):
         raise ParameterError(f"{name}: coordinates must be finite")
     return pts
