@@ -1,5 +1,6 @@
 """What a researcher gets out: archive metadata, defaults that are not locked, figures and exports that show what they
 claim (items 16-18 of the new-user defects issue)."""
+import re
 import subprocess
 import sys
 import warnings
@@ -132,6 +133,21 @@ def test_run_with_output_prints_one_status_line(tmp_path):
     lines = [li for li in p.stdout.splitlines() if li.strip()]
     assert len(lines) == 2 and lines[1].startswith("wrote "), p.stdout
     assert lines[0].startswith("tp1: complete, 20 steps") and " s " in lines[0], p.stdout
+
+
+@pytest.mark.parametrize("kw, said", [
+    (dict(k=0.05), r"tp1: incomplete at t = 0\.5 of T = 0\.6 s, 10 of 12 steps of the explicit scheme"),
+    (dict(scheme="implicit", rtol=1e-3, k_min=1e-4), r"tp1: incomplete at t = 0\.39\d* of T = 0\.6 s, \d+ steps of the "
+                                                     r"implicit scheme"),
+])
+def test_the_status_line_of_a_stopped_run_says_where_it_stopped(kw, said):
+    """An error-controlled run that stopped said "12292 of 12292 steps" (its steps are not planned: N of N said
+    nothing). The line now says the time it reached, of T, and the steps planned only where they were."""
+    from workbench.cli import _status_line
+
+    with pytest.raises(workbench.Diverged) as caught:
+        workbench.run("tp1", h=0.25, T=0.6, delta="0.01/(t-0.55)", u0="0.01/(-0.55)", progress=False, **kw)
+    assert re.match(said, _status_line(caught.value.dataset)), _status_line(caught.value.dataset)
 
 
 @pytest.mark.parametrize("name, kw", [("memory_hertz3d", {}), ("slab", dict(h=0.1)), ("block", dict(h=0.1, order=1))])

@@ -232,10 +232,12 @@ def cmd_show(args) -> int:
 
 def _status_line(ds) -> str:
     a = ds.attrs
-    steps = f"{a['nsteps']} steps"
-    if a["status"] == "incomplete" and "step" in ds.coords and ds.sizes.get("time", 0):
-        steps = f"{int(ds.step.values[-1])} of {a['nsteps']} steps"  # (the last step it kept, of those planned)
-    return (f"{a['scene']}: {a['status']}, {steps} of the {a['scheme']} scheme in {a['wall_time']:.3g} s "
+    status, steps = a["status"], f"{a['nsteps']} steps"
+    if status == "incomplete" and "step" in ds.coords and ds.sizes.get("time", 0):
+        status += f" at t = {float(ds.time.values[-1]):.6g} of T = {float(a['T']):g} s"
+        if "accepted_steps" not in a:  # (the last step it kept, of those planned; error-controlled steps are not
+            steps = f"{int(ds.step.values[-1])} of {a['nsteps']} steps"  # planned: "N of N" said nothing)
+    return (f"{a['scene']}: {status}, {steps} of the {a['scheme']} scheme in {a['wall_time']:.3g} s "
             f"(setup {a['setup_time']:.3g} s), ndof {a['ndof']}")
 
 
