@@ -45,6 +45,15 @@ def test_a_run_process_imports_nothing_it_does_not_use(tmp_path):
     np.testing.assert_array_equal(ds.contact_pressure.values, again.contact_pressure.values)
 
 
+def test_a_study_without_a_bar_does_not_import_tqdm():
+    """``Study.run(progress=False)`` imported tqdm.auto, which in a notebook without ipywidgets prints a TqdmWarning in
+    a cell that asked for no bar; a run without a bar never imported it."""
+    code = ("import sys, workbench\nworkbench.Study('tp1', h=0.5, k=[0.5, 0.25], T=0.5, reference='exact', workers=0)"
+            ".run(progress=False)\nprint('tqdm', sys.modules.get('tqdm') is not None)\n")
+    p = subprocess.run([sys.executable, "-c", code], capture_output=True, text=True, timeout=300)
+    assert p.returncode == 0 and "tqdm False" in p.stdout, p.stdout + p.stderr
+
+
 def test_a_study_process_keeps_dask():
     """`workbench study` may send its cases to a dask cluster (--scheduler): its process does not count dask as
     absent, and neither does a session that calls the library (a notebook may use dask later)."""

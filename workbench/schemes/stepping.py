@@ -459,7 +459,7 @@ def march(disc, scheme, steps, observe, *, progress=None, limit=None, limit_orig
     # delays the detection of an instability that began before it by at most their windows (12 and 20 steps)
     guard = _Guard(disc, scheme, limit, limit_origin)
     n = steps.taken
-    bar = _progress_bar(progress if disc.world.root else False, total=steps.n_steps, initial=n, unit="step",
+    bar = progress_bar(progress if disc.world.root else False, total=steps.n_steps, initial=n, unit="step",
                         mininterval=0.5, leave=False, desc=disc.scene.name)
     try:
         while not steps.done():
@@ -587,7 +587,7 @@ class _NoBar:
         pass
 
 
-def _progress_bar(progress, **options):
+def progress_bar(progress, **options):
     """tqdm's bar when one is shown (``progress``, or None: on a terminal), else a stand-in: tqdm's import (30 ms,
     with its monitor thread) is not paid by runs that show none."""
     if not (sys.stderr.isatty() if progress is None else progress):

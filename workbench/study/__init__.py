@@ -185,7 +185,7 @@ class Study:
         taking a multiple of the old T (they are n_compare equal parts of [0, T]).
         ``extend=False`` recomputes such cases from t = 0.
         """
-        from tqdm.auto import tqdm
+        from ..schemes.stepping import progress_bar
 
         record, compare = self._times()
         archive = _archive_folder(archive)
@@ -202,8 +202,8 @@ class Study:
         else:
             stream = execute.subprocesses(tasks, self.workers)
         t0 = time.perf_counter()
-        bar = tqdm(total=len(todo), initial=len(todo) - len(missing), unit="case", desc=f"study {self.scene.name}",
-                   disable=None if progress is None else not progress)
+        bar = progress_bar(progress, total=len(todo), initial=len(todo) - len(missing), unit="case",
+                           desc=f"study {self.scene.name}")  # (progress=False: tqdm not imported, as for a run)
         try:
             kept = True
             for case, ds in stream:
