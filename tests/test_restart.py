@@ -271,6 +271,18 @@ def test_restart_refuses_an_earlier_T_and_another_grid(archives, tmp_path):
     assert workbench.run(restart=archives["tp5"], T=0.2, progress=False).attrs["nsteps"] == 20
 
 
+def test_an_archive_whose_records_were_cut_is_not_continued(archives, tmp_path):
+    """An archive cut with ``ds.isel(time=...)`` keeps its state at the run's last time: continued, its records went
+    on from there with a gap from the cut, without a word. Refused, saying where its records end and where its run
+    recorded up to; the archive as written continues."""
+    ds = workbench.load(archives["tp5"])
+    cut = workbench.write(ds.isel(time=slice(0, 4)), tmp_path / "cut.nc")
+    with pytest.raises(NoRestartState, match=r"its records end at t = 0\.03 s, but its run recorded up to "
+                                                       r"t = 0\.1 s \(records cut"):
+        workbench.run(restart=cut, T=0.2, progress=False)
+    assert workbench.run(restart=archives["tp5"], T=0.2, progress=False).attrs["status"] == "complete"
+
+
 @pytest.mark.parametrize("archive, sets, listed", [
     ("tp5", ["E=2000", "h=0.05", "order=2", "scheme=implicit"],
      ["E 1000 -> 2000", "h 0.1 -> 0.05", "order 1 -> 2", "scheme explicit -> implicit"]),

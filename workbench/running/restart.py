@@ -264,6 +264,11 @@ def _check_consistent(ds: xr.Dataset, state: dict) -> None:
     if "time" not in ds.dims or "step" not in ds.variables or ds["step"].dims != ("time",):
         raise NoRestartState("the archive has no record over time (a time dimension with its step numbers), which a "
                              "continuation extends")
+    last, recorded = float(state["recorder"]["last"]), ds.time.values
+    if recorded.size and recorded[-1] < last - 1e-9 * max(abs(last), 1.0):
+        # (a continuation appends to the records it finds: a gap from the cut to the state's time, without a word)
+        raise NoRestartState(f"its records end at t = {recorded[-1]:.6g} s, but its run recorded up to t = {last:.6g} "
+                             "s (records cut, e.g. by ds.isel(time=...)): continue from the archive as it was written")
 
 
 def archived_scene(ds: xr.Dataset, *, whole: bool = False, **overrides):
