@@ -379,6 +379,18 @@ def test_tolerance_sweep_of_error_controlled_runs(tmp_path):
     assert os.path.getsize(tmp_path / "both.png") > 10_000
 
 
+def test_the_command_line_says_what_an_order_along_rtol_is():
+    """The orders printed along an rtol axis read as orders of the scheme; the command says that along rtol it is the
+    error's slope against the tolerance. A sweep without rtol does not say it."""
+    p = _cli("study", "tp1", "--sweep", "rtol=1e-2,1e-4", "--scheme", "implicit", "--reference", "exact", "--workers",
+             "0", "--no-progress")
+    assert p.returncode == 0, p.stderr
+    assert "observed order of error: {'rtol': [" in p.stdout and "(along rtol: the slope of the error against the " \
+        "tolerance" in p.stdout, p.stdout
+    p = _cli("study", "tp1", "--k", "0.1", "0.05", "--reference", "exact", "--workers", "0", "--no-progress")
+    assert p.returncode == 0 and "observed order of error: {'k': [" in p.stdout and "along rtol" not in p.stdout
+
+
 def test_study_whose_first_case_is_refused():
     """The largest k above the explicit scheme's k_crit (0.0455 for the springs a step of 0.1 presses in on tp5 at
     h = 0.05) is refused; the study still evaluates (its probe coordinates came from the first case's Dataset, empty

@@ -408,14 +408,17 @@ def cmd_study(args) -> int:
         if code == 0:
             kept_cases = archive.is_dir() and any(archive.glob("*.nc"))  # (its folder may have gone during the run)
             print(f"wrote {args.output}" + (f" (cases in {archive}/)" if kept_cases else " (its cases were not kept)"))
-    missing = False
+    missing = along_rtol = False
     for norm in ("error", "error_V", "error_Q", "error_beta", "error_beta_end"):
         rates = ds.observed_order.sel(norm=norm)
         found = {str(a): [round(float(r), 3) if np.isfinite(r) else "n/a" for r in rates.sel(along=a).values.ravel()]
                  for a in rates.along.values if np.isfinite(rates.sel(along=a).values).any()}
         if found:
             missing |= any("n/a" in v for v in found.values())
+            along_rtol |= "rtol" in found
             print(f"observed order of {norm}: {found}")
+    if along_rtol:  # (not an order of the scheme: how the error follows the tolerance asked)
+        print("(along rtol: the slope of the error against the tolerance, 1 where the error is proportional to it)")
     if missing:
         print("(n/a: no order to fit there: errors of 0, or, with the extrapolated reference, differences between "
               "levels that do not fall)")
