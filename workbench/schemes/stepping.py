@@ -460,7 +460,7 @@ def march(disc, scheme, steps, observe, *, progress=None, limit=None, limit_orig
     guard = _Guard(disc, scheme, limit, limit_origin)
     n = steps.taken
     bar = progress_bar(progress if disc.world.root else False, total=steps.n_steps, initial=n, unit="step",
-                        mininterval=0.5, leave=False, desc=disc.scene.name)
+                       mininterval=0.5, leave=False, desc=disc.scene.name)
     try:
         while not steps.done():
             t_prev, t = steps.next()

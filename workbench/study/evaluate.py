@@ -394,11 +394,11 @@ def extrapolate(ds: xr.Dataset, layout: Layout, ref) -> None:
     if none:  # (NaN errors and no order, which a plot showed as an empty panel without a word)
         import warnings
 
+        finer = {ref.driver: float(x.min()) / (4 if ref.driver in ("h", "k", "h_contact") else 10)}
         warnings.warn(f"reference: the extrapolated reference gives no error estimate for {len(none)} series: the "
                       f"differences between their levels of {ref.driver} do not fall ({'; '.join(none[:3])}"
                       f"{'; ...' if len(none) > 3 else ''}; error-controlled runs of neighbouring tolerances may take "
-                      "the same steps); give a finer run as the reference, such as {'"
-                      f"{ref.driver}': {float(x.min()) / (4 if ref.driver in ('h', 'k', 'h_contact') else 10):g}}} or 'finest'",
+                      f"the same steps); give a finer run as the reference, such as {finer} or 'finest'",
                       RuntimeWarning, stacklevel=4)
     orders, spread = fit(ds, layout)
     ds["observed_order"] = orders
