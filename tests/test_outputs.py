@@ -70,6 +70,25 @@ def test_generic_block_is_not_locked_and_p1_on_a_thin_body_warns(tmp_path):
     assert not any("lock" in str(w.message) for w in caught)
 
 
+def test_a_figure_is_written_in_the_format_its_name_asks_for(tmp_path):
+    """Every figure was PNG whatever its name (a .pdf that a PDF viewer or LaTeX then refused). The suffix says the
+    format now (no suffix: PNG); a suffix matplotlib does not write is refused by name, on the command line before
+    the run."""
+    from workbench import plotting
+
+    ds = workbench.run("tp1", h=0.5, k=0.05, T=0.2, progress=False)
+    magic = {"a.pdf": b"%PDF", "a.svg": b"<?xml", "a.png": b"\x89PNG", "a": b"\x89PNG", "a.EPS": b"%!PS"}
+    for name, head in magic.items():
+        plotting.overview(ds, tmp_path / name)
+        assert (tmp_path / name).read_bytes().startswith(head), name
+    with pytest.raises(workbench.ParameterError, match=r"path = '.*a\.docx': a figure is written as png, pdf, svg"):
+        plotting.overview(ds, tmp_path / "a.docx")
+    p = subprocess.run([sys.executable, "-m", "workbench.cli", "run", "tp1", "--h", "0.5", "--T", "0.2", "-o",
+                        str(tmp_path / "r.nc"), "--plot", str(tmp_path / "r.docx"), "--no-progress"],
+                       capture_output=True, text=True)
+    assert p.returncode == 2 and p.stderr.startswith("error: --plot = ") and not (tmp_path / "r.nc").exists()
+
+
 def test_figures_say_what_they_show(tmp_path):
     """Fields in a perceptually uniform map (not jet); the tp2 figure says that the paper's curves disagree with
     the reduced ODE; every convergence panel has a y-label with units."""

@@ -41,11 +41,37 @@ def figure(nrows=1, ncols=1, *, figsize=(5, 3.8), squeeze=True, **kw):
     return fig, axes
 
 
+#: The file formats a figure is written in, by the path's suffix (matplotlib's own; no suffix: PNG).
+FORMATS = ("png", "pdf", "svg", "svgz", "eps", "ps", "jpg", "jpeg", "tif", "tiff")
+
+
+def file_format(path, option: str = "path") -> str:
+    """The format a figure written to ``path`` takes, from its suffix (PNG without one); a ParameterError naming
+    ``option`` for a suffix matplotlib does not write. Every figure had been PNG whatever its name (a .pdf that
+    LaTeX then refused).
+
+    >>> file_format("out/tp1.pdf"), file_format("out/tp1"), file_format("out/tp1.SVG")
+    ('pdf', 'png', 'svg')
+    """
+    from pathlib import Path
+
+    from .errors import ParameterError
+
+    suffix = Path(path).suffix[1:].lower()
+    if not suffix:
+        return "png"
+    if suffix not in FORMATS:
+        raise ParameterError(f"{option} = {str(path)!r}: a figure is written as {', '.join(FORMATS)} (by the "
+                             f"suffix), not .{suffix}")
+    return suffix
+
+
 def _save(fig, path):
     if path is not None:
         from .output.files import atomic_write
 
-        atomic_write(path, lambda tmp: fig.savefig(tmp, format="png", dpi=150, bbox_inches="tight"))
+        fmt = file_format(path)  # (the temporary file has no suffix: the format is given)
+        atomic_write(path, lambda tmp: fig.savefig(tmp, format=fmt, dpi=150, bbox_inches="tight"))
     return fig
 
 
