@@ -4,6 +4,7 @@ References: tp1's closed form / the reduced rod ODE (docs/models.md) for the rod
 case of the sweep, compared on its mesh after exact prolongation (nested meshes).
 """
 import os
+import re
 import signal
 import subprocess
 import sys
@@ -389,6 +390,21 @@ def test_the_command_line_says_what_an_order_along_rtol_is():
         "tolerance" in p.stdout, p.stdout
     p = _cli("study", "tp1", "--k", "0.1", "0.05", "--reference", "exact", "--workers", "0", "--no-progress")
     assert p.returncode == 0 and "observed order of error: {'k': [" in p.stdout and "along rtol" not in p.stdout
+
+
+def test_a_study_option_given_by_set_is_refused_naming_its_option(capsys):
+    """``workbench study ... --set reference=finest`` (or workers, n_compare, ...) ended in a TypeError traceback
+    (the value passed twice); ``--set order=2`` was refused with an example of a list of element sizes. Each is one
+    error line naming the command's option that gives it, exit 2."""
+    from workbench.cli import main
+
+    for item, said in (("reference=finest", "give --reference"), ("n_compare=3", "give --compare"),
+                       ("client=x", "give --scheduler"), ("couple=x", "give it to Study(...) in Python"),
+                       ("order=2", "order is an axis of the study; give --order 2")):
+        assert main(["study", "tp1", "--k", "0.1", "0.05", "--set", item, "--no-progress"]) == 2
+        assert re.match(re.escape(f"error: --set {item}: ") + ".*" + re.escape(said), capsys.readouterr().err)
+    p = _cli("study", "tp1", "--k", "0.1", "0.05", "--set", "workers=0", "--no-progress")
+    assert p.returncode == 2 and p.stderr.startswith("error: --set workers=0: ") and "Traceback" not in p.stderr
 
 
 def test_study_whose_first_case_is_refused():

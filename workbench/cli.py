@@ -387,6 +387,25 @@ def _sweeps(items) -> dict:
     return out
 
 
+#: The study's own options that ``--set`` cannot give (a scene value would have been passed twice: a traceback),
+#: with the command's option that gives them (None: Python's Study(...) alone).
+_STUDY_OPTIONS = {"reference": "--reference", "workers": "--workers", "n_compare": "--compare",
+                  "client": "--scheduler", "k_over_h": "--k-over-h", "sweep": "--sweep", "grids": None,
+                  "couple": None, "measures": None}
+
+
+def _refuse_study_options(overrides: dict, axes) -> None:
+    """``--set`` of a study's own option or of one of its axes (h, k, order, scheme: those given by --set, the
+    others are left out of ``overrides``), refused naming the option that gives it."""
+    for name, value in overrides.items():
+        if name in _STUDY_OPTIONS:
+            how = f"give {_STUDY_OPTIONS[name]}" if _STUDY_OPTIONS[name] else "give it to Study(...) in Python"
+            raise ParameterError(f"--set {name}={value}: {name} is the study's own option, not a scene value; {how}")
+        if name in axes:
+            raise ParameterError(f"--set {name}={value}: {name} is an axis of the study; give --{name} {value} (several "
+                                 "values sweep it)")
+
+
 def cmd_study(args) -> int:
     from pathlib import Path
 
@@ -399,6 +418,7 @@ def cmd_study(args) -> int:
 
     sweep = _sweeps(args.sweep)
     overrides = _overrides(args, swept=tuple(axes) + tuple(sweep))
+    _refuse_study_options(overrides, axes)
     for name in sweep:
         if name in overrides or getattr(args, name, None) is not None:
             raise ParameterError(f"{name} is given twice (--sweep {name}=... and as a value); give it once")
@@ -538,8 +558,8 @@ def build_parser() -> argparse.ArgumentParser:
     p.add_argument("--workers", type=int, default=2, help="local worker processes (0: in this process)")
     p.add_argument("--scheduler", help="dask.distributed scheduler address (run the cases there)")
     p.add_argument("-o", "--output", help="netCDF archive of the study (cases archived in OUTPUT.cases/)")
-    p.add_argument("--plot", help="PNG convergence plot")
-    p.add_argument("--pareto", help="PNG error-vs-cost plot")
+    p.add_argument("--plot", help="convergence plot (PNG, PDF, SVG, ... by the suffix)")
+    p.add_argument("--pareto", help="error-vs-cost plot (PNG, PDF, SVG, ... by the suffix)")
     p.add_argument("--no-progress", action="store_true")
     p.set_defaults(func=cmd_study)
     p = sub.add_parser("reproduce", help="the paper's test problems 1-5: archives, Figs. 2-19, key numbers")
