@@ -4,6 +4,7 @@ References: the built-in scene of the same body and mesh (a mesh written to a gm
 the same vertices and elements, so the runs must agree bitwise); the named errors of docs/conventions.md.
 """
 import math
+import re
 import subprocess
 import sys
 
@@ -93,6 +94,23 @@ def test_a_netgen_geometry_is_meshed_at_h(tmp_path):
 
 def _run_cli(*args, cwd=None):
     return subprocess.run([sys.executable, "-m", "workbench.cli", *args], capture_output=True, text=True, cwd=cwd)
+
+
+@pytest.mark.parametrize("scene, model", [("mesh2d", "B"), ("memory_mesh2d", "A")])
+def test_a_mesh_scene_named_with_the_other_model_is_refused(slab_msh, tmp_path, scene, model):
+    """A TOML file with scene = "mesh2d" and model = "B" ran Model A without a word (and the other way round); in
+    Python the refusal said a built-in scene has its own model, where a mesh was given. Both name the contradiction
+    and the scene of the model asked for."""
+    said = f"model = '{model}' contradicts scene = '{scene}'"
+    other = {"mesh2d": "memory_mesh2d", "memory_mesh2d": "mesh2d"}[scene]
+    toml = tmp_path / "both.toml"
+    toml.write_text(f'scene = "{scene}"\nmodel = "{model}"\ngeometry = "{slab_msh}"\n[boundaries]\n'
+                    + "".join(f'{k} = "{v}"\n' for k, v in SLAB_ROLES.items()))
+    with pytest.raises(ParameterError, match=re.escape(said) + f".*scene = '{other}' for Model {model}"):
+        workbench.scene(str(toml))
+    with pytest.raises(ParameterError, match=re.escape(said)):
+        workbench.scene(scene, mesh=str(slab_msh), boundaries=SLAB_ROLES, model=model)
+    assert workbench.scene(other, mesh=str(slab_msh), boundaries=SLAB_ROLES).model == model
 
 
 @pytest.mark.slow

@@ -693,11 +693,19 @@ def _toml_mesh_scene(path: Path, data: dict, overrides) -> Scene:
         if base not in MESH_SCENES.values():
             raise ParameterError(f"scene = {base!r}: a body from a mesh file starts from one of "
                                  f"{', '.join(MESH_SCENES.values())}")
+        if "model" in data and PRESETS[base].model != model:  # (the scene's model was taken, without a word)
+            raise ParameterError(_model_contradicts(base, model, dim))
         values = dict(params) | {"mesh": str(mesh), "boundaries": roles} | dict(overrides or {})
         return make(data.get("name", path.stem), values, base=base, description=data.get("description", ""),
                     source=str(path.resolve()))
     except ParameterError as err:
         raise ParameterError(f"{path.name}: {err}") from None
+
+
+def _model_contradicts(base: str, model: str, dim: int) -> str:
+    """The refusal of a mesh scene named together with the other model."""
+    return (f"model = {model!r} contradicts scene = {base!r} (Model {PRESETS[base].model}'s mesh scene): give one of "
+            f"them, or scene = {MESH_SCENES[(dim, model)]!r} for Model {model}")
 
 
 def _looks_like_path(text: str) -> bool:
@@ -741,6 +749,9 @@ def scene(name_or_path=None, *, model=None, **overrides) -> Scene:
         if not isinstance(name_or_path, Scene) and text not in PRESETS and (_looks_like_path(text) or _is_file(text)):
             raise ParameterError(f"model = {model!r}: a scene file names its model in the file (model = \"A\" or "
                                  "\"B\" at its top); model= applies to a body given as mesh=...")
+        if text in MESH_SCENES.values() and "mesh" in overrides and PRESETS[text].model != model:
+            dim = next(d for (d, _), name in MESH_SCENES.items() if name == text)
+            raise ParameterError(_model_contradicts(text, model, dim))
         raise ParameterError(f"model = {model!r} applies to a body from a mesh (mesh=...); a built-in scene has its own "
                              "model")
     if isinstance(name_or_path, Scene):
