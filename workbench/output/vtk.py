@@ -130,6 +130,22 @@ def contact_facets(ds):
     return faces[idx]
 
 
+def _oriented(points, cells, dim: int):
+    """The cells with a positive volume (2D: counterclockwise), as VTK's cells are defined: two vertices swapped
+    where the mesh has them the other way (netgen's tetrahedra all are: ParaView's cell sizes and integrals of a
+    field over the body came out negative). Edge midpoints follow from the vertices' order (:func:`_quadratic`)."""
+    if dim < 2 or not len(cells):
+        return cells
+    p = points[:, :dim][cells]
+    edges = p[:, 1:] - p[:, :1]  # (cell, dim, dim): the edges from the first vertex
+    flip = np.linalg.det(edges) < 0
+    if not flip.any():
+        return cells
+    cells = cells.copy()
+    cells[flip, 1], cells[flip, 2] = cells[flip, 2], cells[flip, 1].copy()
+    return cells
+
+
 def _quadratic(ds, cells):
     """Points and cells of the quadratic grid: vertices, then the edge midpoints of ``ds.edge_vertices``."""
     dim = _dim(ds)
@@ -225,7 +241,7 @@ def _volume_grid(ds):
     edge midpoints appended as nodes, so ParaView draws the field's own values there)."""
     dim = _dim(ds)
     points = _points3(ds, "vertex")
-    cells = ds.cell_vertices.values[:, : dim + 1]
+    cells = _oriented(points, ds.cell_vertices.values[:, : dim + 1], dim)
     quadratic = "u_edges" in ds
     if quadratic:
         edges = ds.edge_vertices.values
