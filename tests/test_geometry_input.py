@@ -96,6 +96,28 @@ def _run_cli(*args, cwd=None):
     return subprocess.run([sys.executable, "-m", "workbench.cli", *args], capture_output=True, text=True, cwd=cwd)
 
 
+def test_a_run_on_a_mesh_file_continues_after_its_folder_moved(slab_msh, tmp_path):
+    """A project folder moved (to a cluster, a new checkout): the archive names its mesh by the old path, and
+    continuing it with the scene file at its new place was refused ("no such file"). The same mesh (its digest) at a
+    new path is the archive's mesh: the continuation equals the run straight to the new T. Without the scene, the
+    refusal says to give it."""
+    import shutil
+
+    project = tmp_path / "project"
+    project.mkdir()
+    shutil.copy(slab_msh, project / "slab.msh")
+    (project / "slab.toml").write_text('geometry = "slab.msh"\n[boundaries]\n'
+                                       + "".join(f'{k} = "{v}"\n' for k, v in SLAB_ROLES.items())
+                                       + '[parameters]\ntraction = "(0, -t)"\nT = 0.1\nk = 0.05\nscheme = "implicit"\n')
+    archive = workbench.write(workbench.run(str(project / "slab.toml"), progress=False), tmp_path / "run.nc")
+    straight = workbench.run(str(project / "slab.toml"), T=0.2, progress=False)
+    project.rename(tmp_path / "moved")
+    with pytest.raises(ParameterError, match="no such file.*give the scene at its new place"):
+        workbench.run(restart=archive, T=0.2, progress=False)
+    more = workbench.run(str(tmp_path / "moved" / "slab.toml"), restart=archive, T=0.2, progress=False)
+    np.testing.assert_array_equal(more.u_probe.values, straight.u_probe.values)
+
+
 @pytest.mark.parametrize("scene, model", [("mesh2d", "B"), ("memory_mesh2d", "A")])
 def test_a_mesh_scene_named_with_the_other_model_is_refused(slab_msh, tmp_path, scene, model):
     """A TOML file with scene = "mesh2d" and model = "B" ran Model A without a word (and the other way round); in

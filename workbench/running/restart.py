@@ -313,7 +313,11 @@ def differences(old, new, t: float, old_terms: str, new_terms: str) -> list:
 def check(path, archive: xr.Dataset, state: dict, scene, model_terms) -> None:
     """Refuse (ParameterError) a continuation of ``archive`` as ``scene`` that the archive's run would not be."""
     t = state["time"]
-    old = archived_scene(archive, whole=True)  # (a default changed since by another version is a difference)
+    # (a default changed since by another version is a difference; a mesh file moved since, given again at its new
+    # place with the same content (its digest), is the archive's mesh: the archive's path would not be found)
+    digest = json.loads(archive.attrs["parameters_json"]).get("mesh_digest")
+    moved = {"mesh": scene["mesh"]} if digest and scene.values.get("mesh_digest") == digest else {}
+    old = archived_scene(archive, whole=True, **moved)
     diff = differences(old, scene, t, archive.attrs.get("terms", ""), ",".join(model_terms) or "none")
     if diff:
         raise ParameterError(f"restart {str(path)!r}: the run asked for differs from the archive's in "

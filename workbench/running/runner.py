@@ -317,8 +317,10 @@ def _scene_and_archive(scene, restart, overrides: dict, model):
         sc = restarts.archived_scene(archive, **overrides) if scene is None or named else \
             scenes.scene(scene, **overrides)
     except ParameterError as err:
-        raise restarts.NoRestartState(f"restart {str(restart)!r}: the archive's scene cannot be made again ({err})") \
-            from None
+        moved = " (a mesh file moved since: give the scene at its new place with the restart, e.g. `workbench run " \
+            "FILE.toml --restart ...`)" if str(err).startswith("mesh = ") and scene is None else ""
+        raise restarts.NoRestartState(f"restart {str(restart)!r}: the archive's scene cannot be made again ({err})"
+                                      f"{moved}") from None
     restarts.check(restart, archive, state, sc, (model or sc.model_of()).terms)
     return sc, _Resume(archive, state, restart)
 
