@@ -96,6 +96,23 @@ def _run_cli(*args, cwd=None):
     return subprocess.run([sys.executable, "-m", "workbench.cli", *args], capture_output=True, text=True, cwd=cwd)
 
 
+def test_an_interface_inside_the_body_is_not_a_contact_side(tmp_path):
+    """Two glued parts with their interface named: given the role contact it was taken as a contact side inside
+    the body (its vertices in node_weight). Refused by name; free (or clamped) it runs."""
+    from netgen.occ import X, Y, Glue, MoveTo, OCCGeometry
+
+    a, b = MoveTo(0, 0).Rectangle(0.5, 0.2).Face(), MoveTo(0.5, 0).Rectangle(0.5, 0.2).Face()
+    for face in (a, b):
+        face.edges.Min(Y).name, face.edges.Max(Y).name = "bottom", "top"
+    a.edges.Min(X).name, b.edges.Max(X).name, a.edges.Max(X).name = "left", "right", "iface"
+    path = str(tmp_path / "two.vol")
+    OCCGeometry(Glue([a, b]), dim=2).GenerateMesh(maxh=0.1).Save(path)
+    roles = {"bottom": "contact", "left": "clamped", "top": "traction", "right": "free"}
+    with pytest.raises(ParameterError, match="iface = 'contact' is an interface between two parts of the mesh"):
+        workbench.scene(mesh=path, boundaries=roles | {"iface": "contact"})
+    assert workbench.scene(mesh=path, boundaries=roles | {"iface": "free"}).body.boundaries["contact"] == "bottom"
+
+
 def test_a_run_on_a_mesh_file_continues_after_its_folder_moved(slab_msh, tmp_path):
     """A project folder moved (to a cluster, a new checkout): the archive names its mesh by the old path, and
     continuing it with the scene file at its new place was refused ("no such file"). The same mesh (its digest) at a

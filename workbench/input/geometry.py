@@ -254,6 +254,24 @@ class Block(Geometry):
         return ngs.Mesh(ngm)
 
 
+def _refuse_interfaces(mesh, cells, contact: list, dim: int) -> None:
+    """A contact boundary must be a side of the body: one whose facets bound one cell. A named interface between two
+    subdomains given the role contact was taken as a contact side inside the body (its vertices' shares added to
+    node_weight, contact forces acting within the body)."""
+    import itertools
+
+    import numpy as np
+
+    for name in contact:
+        facets = {tuple(sorted(v.nr for v in el.vertices)) for el in mesh.Boundaries(name).Elements()}
+        near = cells[np.isin(cells, list({v for f in facets for v in f})).any(axis=1)]  # (the cells at the side)
+        faces = np.sort(np.concatenate([near[:, list(c)] for c in itertools.combinations(range(dim + 1), dim)]), axis=1)
+        unique, counts = np.unique(faces, axis=0, return_counts=True)
+        if facets & {tuple(f) for f in unique[counts > 1].tolist()}:
+            raise ParameterError(f"boundaries: {name} = 'contact' is an interface between two parts of the mesh, not "
+                                 "a side of the body; the contact side is an outer boundary")
+
+
 class MeshBody(Geometry):
     """A body from a mesh file (:mod:`workbench.input.meshes`), its boundaries given roles.
 
@@ -325,6 +343,7 @@ class MeshBody(Geometry):
         edges = [(a, b) for a in range(self.dim + 1) for b in range(a + 1, self.dim + 1)]
         self._h = float(max(np.linalg.norm(xyz[nodes[:, a]] - xyz[nodes[:, b]], axis=1).max() for a, b in edges))
         self._ne = len(nodes)
+        _refuse_interfaces(mesh, nodes, by_role["contact"], self.dim)
         self.h = float(h) if h else self._h
         self.requested_cells = ()
 
