@@ -108,6 +108,12 @@ def _check_outputs(args, *, cases=None) -> None:
         value = getattr(args, option, None)
         if value is not None:
             given[f"--{option}"] = check_output(value, f"--{option}", folder=folder)
+    seen = {}
+    for option, path in given.items():  # two outputs in one file: the later would replace the earlier
+        key = Path(os.path.abspath(path))
+        if key in seen:
+            raise ParameterError(f"{seen[key]} and {option} name the same path {str(path)!r}; give each its own")
+        seen[key] = option
     if any(getattr(args, option, None) is not None for option in ("plot", "pareto")):
         _check_backend()  # (first: matplotlib's import fails half-done on a backend it does not know)
         from .plotting import file_format
@@ -115,12 +121,6 @@ def _check_outputs(args, *, cases=None) -> None:
         for option in ("plot", "pareto"):
             if getattr(args, option, None) is not None:
                 file_format(getattr(args, option), f"--{option}")
-    seen = {}
-    for option, path in given.items():  # two outputs in one file: the later would replace the earlier
-        key = Path(os.path.abspath(path))
-        if key in seen:
-            raise ParameterError(f"{seen[key]} and {option} name the same path {str(path)!r}; give each its own")
-        seen[key] = option
 
 
 def _check_backend() -> None:
