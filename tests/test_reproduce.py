@@ -233,3 +233,11 @@ def test_vtk_export_3d(tmp_path):
     mids = c["points"][c["connectivity"].reshape(-1, 3)].mean(axis=1)
     assert np.allclose(mids[:, :2], np.column_stack([ds.facet_x.values, ds.facet_y.values]))
     assert np.allclose(c["points"][:, 2], 0.0)
+    # P2: quadratic tetrahedra, positive, each edge node at the midpoint of VTK's edge of its corners
+    ds = workbench.run("block", h=0.25, T=0.01, k=0.01, order=2, progress=False)
+    g = read_vtu(vtk.export(ds, tmp_path, stem="q")[0])
+    assert np.all(g["cell_types"] == 24)
+    cells, p = g["connectivity"].reshape(-1, 10), g["points"]
+    assert (np.linalg.det(p[cells[:, 1:4]] - p[cells[:, :1]]) > 0).all()
+    for j, (a, b) in enumerate([(0, 1), (1, 2), (2, 0), (0, 3), (1, 3), (2, 3)]):
+        assert np.allclose(p[cells[:, 4 + j]], 0.5 * (p[cells[:, a]] + p[cells[:, b]]))
