@@ -524,6 +524,7 @@ def test_a_reference_run_takes_the_most_accurate_value_of_what_the_cases_differ_
                    workers=0)
         (ref,) = st.reference.cases()
         assert ref["memory_rule"] == "trapezoid" and ref.k == 0.01
+        assert st.reference.describe().endswith('the most accurate: {"memory_rule": "trapezoid"}')
     st = Study("memory_hertz", h=0.5, k=0.25, T=0.5, sweep={"h_contact": [0.04, 0.02]}, reference={"k": 0.125},
                workers=0)
     assert st.reference.cases()[0]["h_contact"] == 0.02

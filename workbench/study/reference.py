@@ -60,9 +60,14 @@ class RunReference:
         groups = {}
         for case in cases:
             groups.setdefault(physics_of(case), []).append(case)
+        picked = {}
         for group, members in groups.items():
-            self.by_physics[group] = Case(dict(members[0].values(), **_most_accurate(members, values), **values))
-        self._describe = describe
+            chosen = _most_accurate(members, values)
+            picked |= chosen
+            self.by_physics[group] = Case(dict(members[0].values(), **chosen, **values))
+        # (the options chosen for it, said where it is described: the dataset's attribute, the plots' titles)
+        self._describe = describe + (f"; of what the cases differ in, the most accurate: "
+                                     f"{json.dumps(picked, sort_keys=True, default=str)}" if picked else "")
 
     def cases(self) -> list:
         return list(dict.fromkeys(self.by_physics.values()))
