@@ -699,6 +699,14 @@ def build_inputs():  # noqa: C901 (a long list, on purpose)
         quick=True)
     add("tb_study_plot_of_tolerances", "own", "run", ["study", "tp2", "--sweep", "rtol=1e-2,1e-3", "--scheme", "bdf2",
                                                       "--workers", "0", "--no-progress", "-o", "s.nc", "--plot", "s.png"])
+    # (the third and fourth outside passes, 2026-12: a study option by --set, a figure's format, the table's "none")
+    add("sa_study_set_reference", "own", "refuse-naming:reference",
+        ["study", "tp1", "--k", "0.1", "0.05", "--set", "reference=finest", "--workers", "0", "--no-progress"],
+        quick=True)
+    add("tb_plot_of_an_unknown_format", "own", "refuse-naming:--plot", RUN("tp1", "-o", "out.nc", "--plot", "f.docx"),
+        quick=True)
+    add("tb_prony_none_as_the_table_shows", "own", "run", RUN("memory_rod", "--set", "prony=none", "-o", "out.nc"),
+        quick=True)
     add("sa_study_sweep_of_T", "own", "refuse-naming:T",
         ["study", "rod", "--k", "0.04", "0.02", "--sweep", "T=0.5,1", "--workers", "0", "--no-progress"])
     add("tb_hertz_load_1_over_t", I, "either-naming:load", RUN("hertz", "--set", "load=1/t"))
