@@ -344,8 +344,7 @@ class MeshBody(Geometry):
         self._h = float(max(np.linalg.norm(xyz[nodes[:, a]] - xyz[nodes[:, b]], axis=1).max() for a, b in edges))
         self._ne = len(nodes)
         _refuse_interfaces(mesh, nodes, by_role["contact"], self.dim)
-        self.h = float(h) if h else self._h
-        self.requested_cells = ()
+        self.h, self.requested_cells = (float(h) if h else self._h), ()
 
     @classmethod
     def from_values(cls, values):
