@@ -517,8 +517,8 @@ def test_case_files_are_keyed_by_scheme_options_and_versions(tmp_path):
 def test_a_reference_run_takes_the_most_accurate_value_of_what_the_cases_differ_in():
     """The reference run took every option it left open from the first case: a memory_rule sweep listed rectangle
     first compared both rules with a rectangle-rule run (the trapezoid's order 1.09; 1.79 listed the other way), an
-    h_contact sweep with its coarsest contact mesh. It takes the trapezoid rule and the smallest h_contact now, in
-    either order; an option without such an order (the contact solver) is the first case's, and said."""
+    h_contact sweep with its coarsest contact mesh. It takes the trapezoid rule, the kernel by quadrature and the
+    smallest h_contact now, in either order; an option without such an order (the contact solver) is the first case's, and said."""
     for rules in (["rectangle", "trapezoid"], ["trapezoid", "rectangle"]):
         st = Study("memory_slab", h=0.25, k=[0.1, 0.05], T=0.2, sweep={"memory_rule": rules}, reference={"k": 0.01},
                    workers=0)
@@ -528,6 +528,9 @@ def test_a_reference_run_takes_the_most_accurate_value_of_what_the_cases_differ_
     st = Study("memory_hertz", h=0.5, k=0.25, T=0.5, sweep={"h_contact": [0.04, 0.02]}, reference={"k": 0.125},
                workers=0)
     assert st.reference.cases()[0]["h_contact"] == 0.02
+    st = Study("memory_rod", k=[0.1, 0.05], T=0.2, kernel="exp(-t/0.2)", kernel_E=0.5, prony=(), reference={"k": 0.01},
+               sweep={"kernel_approximation": ["exponentials", "quadrature"]}, workers=0)
+    assert st.reference.cases()[0]["kernel_approximation"] == "quadrature"
     with pytest.warns(RuntimeWarning, match=r"the cases differ in contact_solver \(the reference takes 'condensed'\)"):
         Study("memory_slab", h=0.25, k=[0.1, 0.05], T=0.2, sweep={"contact_solver": ["condensed", "coupled"]},
               reference={"k": 0.01}, workers=0)

@@ -87,8 +87,10 @@ class RunReference:
 
 
 #: For a discretisation option the cases differ in and the reference leaves open, the reference's value: the most
-#: accurate one (the trapezoid rule; the smallest tolerance or contact mesh size; the most cells).
+#: accurate one (the trapezoid rule; the kernel itself by quadrature, not its fitted exponentials; the smallest
+#: tolerance or contact mesh size; the most cells).
 _MOST_ACCURATE = {"memory_rule": lambda seen: "trapezoid" if "trapezoid" in seen else seen[0],
+                  "kernel_approximation": lambda seen: "quadrature" if "quadrature" in seen else seen[0],
                   "kernel_tol": min, "contact_tol": min, "h_contact": min, "nx": max, "ny": max, "nz": max}
 
 
