@@ -528,8 +528,8 @@ def test_a_reference_run_takes_the_most_accurate_value_of_what_the_cases_differ_
     st = Study("memory_hertz", h=0.5, k=0.25, T=0.5, sweep={"h_contact": [0.04, 0.02]}, reference={"k": 0.125},
                workers=0)
     assert st.reference.cases()[0]["h_contact"] == 0.02
-    st = Study("memory_rod", k=[0.1, 0.05], T=0.2, kernel="exp(-t/0.2)", kernel_E=0.5, prony=(), reference={"k": 0.01},
-               sweep={"kernel_approximation": ["exponentials", "quadrature"]}, workers=0)
+    st = Study("memory_rod", k=[0.1, 0.05], T=0.2, kernel="exp(-t/0.2)", kernel_E=0.5, prony=(),
+               reference={"k": 0.01}, sweep={"kernel_approximation": ["exponentials", "quadrature"]}, workers=0)
     assert st.reference.cases()[0]["kernel_approximation"] == "quadrature"
     with pytest.warns(RuntimeWarning, match=r"the cases differ in contact_solver \(the reference takes 'condensed'\)"):
         Study("memory_slab", h=0.25, k=[0.1, 0.05], T=0.2, sweep={"contact_solver": ["condensed", "coupled"]},
