@@ -68,8 +68,8 @@ def test_the_carried_state_is_the_same_field_on_the_finer_mesh(name, scheme):
 def test_a_run_that_follows_its_solution_meets_the_tolerance_at_every_estimate():
     """tp4's slab (Model A, backward Euler) refined during the run: the estimate within space_tol at every estimate
     time, the meshes only finer, the records on the final mesh (at the contact vertices a coarser mesh did not have,
-    its P1 field), the snapshots carried exactly (the field at the probes is the one recorded then), and the result closer
-    to a straight run on the final mesh than the given mesh's run is."""
+    its P1 field), the snapshots carried exactly (the field at the probes is the one recorded then), and the result
+    closer to a straight run on the final mesh than the given mesh's run is."""
     kw = dict(scheme="implicit", T=0.3, h=0.05, snapshots=(0.01, 0.02, 0.3), progress=False)
     tol = 0.1
     ds = workbench.run("tp4", space_tol=tol, space_adapt="during", **kw)

@@ -518,7 +518,8 @@ def test_a_reference_run_takes_the_most_accurate_value_of_what_the_cases_differ_
     """The reference run took every option it left open from the first case: a memory_rule sweep listed rectangle
     first compared both rules with a rectangle-rule run (the trapezoid's order 1.09; 1.79 listed the other way), an
     h_contact sweep with its coarsest contact mesh. It takes the trapezoid rule, the kernel by quadrature and the
-    smallest h_contact now, in either order; an option without such an order (the contact solver) is the first case's, and said."""
+    smallest h_contact now, in either order; an option without such an order (the contact solver) is the first
+    case's, and said."""
     for rules in (["rectangle", "trapezoid"], ["trapezoid", "rectangle"]):
         st = Study("memory_slab", h=0.25, k=[0.1, 0.05], T=0.2, sweep={"memory_rule": rules}, reference={"k": 0.01},
                    workers=0)

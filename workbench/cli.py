@@ -402,8 +402,8 @@ def _refuse_study_options(overrides: dict, axes) -> None:
             how = f"give {_STUDY_OPTIONS[name]}" if _STUDY_OPTIONS[name] else "give it to Study(...) in Python"
             raise ParameterError(f"--set {name}={value}: {name} is the study's own option, not a scene value; {how}")
         if name in axes:
-            raise ParameterError(f"--set {name}={value}: {name} is an axis of the study; give --{name} {value} (several "
-                                 "values sweep it)")
+            raise ParameterError(f"--set {name}={value}: {name} is an axis of the study; give --{name} {value} "
+                                 "(several values sweep it)")
 
 
 def cmd_study(args) -> int:

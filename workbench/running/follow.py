@@ -469,8 +469,9 @@ def _new_nodes(move, disc, final_disc, index: np.ndarray):
     """(the final mesh's contact vertices that the coarse mesh did not have, the weights of the coarse contact vertices
     at them (new, coarse node)), or None where there are none or the meshes are not P1 (no vertex interpolation).
     On the contact side a new vertex lies on a coarse contact facet, so the coarse vertices off the side, left out
-    here, weigh 0 there (on a curved side, where the new vertex moved onto the geometry, nearly 0). Left NaN, the coarse records had held the
-    final mesh's weights for vertices they did not have: a force sum 34 % low (memory_slab, space_tol 0.1)."""
+    here, weigh 0 there (on a curved side, where the new vertex moved onto the geometry, nearly 0). Left NaN, the
+    coarse records had held the final mesh's weights for vertices they did not have: a force sum 34 % low
+    (memory_slab, space_tol 0.1)."""
     missing = np.nonzero(index < 0)[0]
     if move.P is None or not missing.size:
         return None
