@@ -186,10 +186,11 @@ def _underived(scene) -> list:
     from ..input.scenes import PRESETS
 
     preset = PRESETS.get(scene.base)
-    if preset is None or preset.derive is None or not set(preset.derive(scene.values)) <= scene.set_by_user:
+    derived = set(preset.derive(scene.values)) if preset is not None and preset.derive is not None else set()
+    if not derived or not derived <= scene.set_by_user:
         return []
     given = [n for n in preset.extras if n in scene.set_by_user]
-    made = ", ".join(preset.derive(scene.values))
+    made = ", ".join(sorted(derived))
     return [f"{scene.name}: {n} = {scene[n]} has no effect with {made} given (it only makes the preset's {made})"
             for n in given]
 
