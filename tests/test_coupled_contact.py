@@ -35,6 +35,11 @@ MODEL_A = {
     "hemisphere": ("hertz3d", dict(k=0.1)),
     "hemisphere P2, stiff compliance": ("hertz3d", dict(order=2, h_contact=0.04, c_nu=1e7, tau=1e-3, k=0.1, T=0.3)),
     "rod": ("tp3", dict(scheme="implicit", T=1.0)),
+    # (a compliance of exponent 2 under a traction that tilts the slab: the condensed Newton's convergence test was
+    # scaled by the sum of S0^-1's absolute terms, 10^4 times the forces here, and stopped at 6e-6 of u)
+    "slab, m_nu = 2, tilting traction": ("slab", dict(scheme="implicit", h=0.05, k=0.01, T=0.1, m_nu=2.0, c_nu=1e3,
+                                                      adhesion=False,
+                                                      traction_top="(0,-5*(1+10*t)*ifpos(x-0.5,1,-1))")),
 }
 
 

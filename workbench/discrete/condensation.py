@@ -43,6 +43,10 @@ from .boundary import contact_dofs
 from .solvers import Multiple, inverse
 from .springs import SpringsFactor
 
+#: The residual a semismooth Newton takes as round-off, per unit of the absolute terms it sums (a few hundred
+#: products of doubles, each good to eps).
+ROUNDOFF = 64 * np.finfo(float).eps
+
 
 class ContactOperator:
     """f(u_C) = j(beta, u, .)|_C and its Jacobian on the contact dofs C of the components the terms act on.
@@ -253,7 +257,10 @@ class CondensedNewton:
     with phi'(0)/2 <= phi'(a) <= 0 is found by Illinois regula falsi (an inexact line
     search: the energy decreases and a is near the minimum along s). Without it a
     stiff glue (k gamma_nu large) makes the iteration cycle. Converged when
-    |g| <= rtol * (scale of the terms summed in g).
+    |g| <= rtol * max(|S0^{-1} (u_C - z_C)|, |f|), the forces g balances, or where g is at the round-off of its
+    terms, 64 eps |S0^{-1}| |u_C - z_C|. (That sum of absolute terms is no scale for the forces: S0^{-1} is dense
+    with entries of both signs, and on a slab pressed by a traction it was 10^4 times |f|, so rtol times it
+    accepted residuals of 10^-6 of the forces.)
     """
 
     linear_iterations = 0  # (no inner iterations: one dense solve a Newton step)
@@ -270,11 +277,13 @@ class CondensedNewton:
         g_norm = np.inf
         for it in range(self.max_iterations + 1):
             diff = u_C - z_C
-            g = S0_inv @ diff + f
+            elastic = S0_inv @ diff
+            g = elastic + f
             g_norm = np.abs(g).max()
             if not np.isfinite(g_norm):
                 break
-            if g_norm <= self.rtol * max((S0_abs @ np.abs(diff)).max(), np.abs(f).max(), 1e-300):
+            forces = max(np.abs(elastic).max(initial=0.0), np.abs(f).max(initial=0.0))
+            if g_norm <= max(self.rtol * forces, ROUNDOFF * (S0_abs @ np.abs(diff)).max(initial=0.0), 1e-300):
                 return f
             if it == self.max_iterations:
                 break
