@@ -14,6 +14,8 @@ References (all independent of the scheme under test):
 * Problems 4–5: no reference; physical checks (beta(1, 0) falls from 1 but stays > 0.9 at T,
   the loaded tip moves with the load, the von Mises maximum sits at the clamp or the load).
 """
+import json
+
 import numpy as np
 import pytest
 
@@ -133,6 +135,22 @@ def test_main_prints_the_comparison(tmp_path, capsys):
     text = capsys.readouterr().out
     assert "paper: < 1.8e-4" in text and "tp1" in text
     assert (tmp_path / "tp1_bonding.png").exists()
+
+
+def test_a_run_of_another_problem_is_not_compared_with_the_papers_numbers(tmp_path, capsys):
+    """``--set T=0.5`` once printed T = 1's exact values beside the run's as the paper's; the discretisation (h, k,
+    scheme) leaves the comparison on."""
+    from workbench.cli import main
+
+    assert main(["reproduce", "tp1", "--out", str(tmp_path), "--h", "0.1", "--k", "0.05", "--set", "T=0.5",
+                 "--no-side", "--no-progress"]) == 0
+    text = capsys.readouterr().out
+    assert "paper:" not in text and "this run changes T = 0.5 (the paper's 1.0)" in text
+    summary = json.loads((tmp_path / "tp1_numbers.json").read_text())
+    assert summary["paper"] == {} and summary["changed_from_paper"] == {"T": [1.0, 0.5]}
+    assert abs(summary["numbers"]["beta_end_T"] - np.exp(-0.3 * 0.09 * 0.5)) < 1e-4  # (the run's own T)
+    same = reproduce.reproduce("tp1", tmp_path, h=0.1, k=0.05, side=False, scheme="implicit", T=1.0)
+    assert same["changed_from_paper"] == {} and same["paper"] == reproduce.PAPER["tp1"]
 
 
 @pytest.mark.slow
