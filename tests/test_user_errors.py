@@ -969,6 +969,20 @@ def test_a_value_that_acts_only_with_another_that_is_off_is_warned_about(scene, 
         workbench.run(scene, progress=False, **on)
 
 
+def test_a_contact_tol_the_solver_auto_took_does_not_read_is_warned_about():
+    """contact_tol with contact_solver = 'auto' on few points (the condensed solver, exact per active set) was
+    recorded in the archive and ignored without a word; with 'condensed' it is refused before the run."""
+    values = dict(h=0.2, T=0.1, contact_tol=1e-7)
+    with pytest.warns(RuntimeWarning, match=re.escape("contact_tol = 1e-07 has no effect: contact_solver = 'auto' "
+                                                      "took the condensed solver here")):
+        ds = workbench.run("memory_slab", progress=False, **values)
+    assert ds.attrs["contact_solver_used"] == "condensed"
+    with warnings.catch_warnings():
+        warnings.simplefilter("error", RuntimeWarning)
+        ds = workbench.run("memory_slab", progress=False, contact_solver="coupled", **values)
+    assert ds.attrs["contact_solver_used"] == "coupled"
+
+
 @pytest.mark.parametrize("scene, values, made", [
     ("tp3", dict(h=0.25, T=0.02, omega=5.0), dict(delta="0.05*t")),
     ("hertz", dict(h=0.5, T=0.02, tau=0.2), dict(a1=1.0, a2=2.0)),

@@ -160,6 +160,18 @@ def warnings_for(scene, model) -> list:
     return out + _contact_zone(scene, g) + _quadrature_cost(scene, model) + _unused(scene) + _underived(scene)
 
 
+def ignored_by_the_solver(scene, used: dict) -> list:
+    """A value the user gave that the contact solver ``auto`` took does not read: ``contact_tol`` where it took the
+    condensed solver, which solves each active set exactly (``contact_solver = 'condensed'`` with it is refused
+    before the run; ``auto`` decides by the contact points, known once the mesh is made). ``used``: the scheme's
+    :meth:`preflight` record."""
+    if "contact_tol" not in scene.set_by_user or used.get("contact_solver_used") != "condensed":
+        return []
+    return [f"{scene.name}: contact_tol = {scene['contact_tol']:g} has no effect: contact_solver = "
+            f"{scene['contact_solver']!r} took the condensed solver here, which solves each active set exactly "
+            "(contact_solver = 'coupled' takes the tolerance)"]
+
+
 #: Parameters that act only with another: (the parameters, whether that other acts, what it is).
 _ONLY_WITH = ((CONTROL[1:], lambda v: is_adaptive(v["rtol"]), "rtol > 0 (error-controlled steps)"),
               (("gamma_nu", "eps_a", "L", "beta0", "c_tau", "bonding_truncation"), lambda v: v.get("adhesion", False),
