@@ -380,6 +380,23 @@ def test_tolerance_sweep_of_error_controlled_runs(tmp_path):
     assert os.path.getsize(tmp_path / "both.png") > 10_000
 
 
+def test_errors_at_round_off_get_no_order_and_are_said():
+    """tp1's stress and bonding are exact to round-off under both implicit schemes (errors 1e-16..1e-15); their
+    fitted orders were -1.2 and -0.3 along k, printed beside the real ones. They are NaN now, with a warning naming
+    them, while the displacement's order is fitted as before; the reference's norms are in the Dataset."""
+    st = Study("tp1", h=0.1, k=[0.1, 0.05, 0.025], scheme=["implicit", "bdf2"], reference="exact", workers=0)
+    with pytest.warns(RuntimeWarning, match=r"errors at round-off, at most 1e-12 of the reference's norm: error_Q "
+                                            r"\(6 cases\), error_beta \(6 cases\)"):
+        ds = st.run(progress=False)
+    assert (ds.error_Q < 1e-12 * ds.reference_norm_Q).all() and (ds.reference_norm_Q > 0).all()
+    order = ds.observed_order.sel(along="k").squeeze()
+    assert np.isnan(order.sel(norm=["error_Q", "error_beta"])).all()
+    assert 0.8 < float(order.sel(norm="error_V", scheme="implicit")) < 1.2
+    assert 1.6 < float(order.sel(norm="error_V", scheme="bdf2")) < 2.2
+    for name in ("reference_norm_V", "reference_norm_Q", "reference_norm_beta"):
+        assert ds[name].attrs["units"] and ds[name].attrs["long_name"].startswith("max over compared times")
+
+
 def test_the_command_line_says_what_an_order_along_rtol_is():
     """The orders printed along an rtol axis read as orders of the scheme; the command says that along rtol it is the
     error's slope against the tolerance. A sweep without rtol does not say it."""

@@ -123,20 +123,21 @@ def compare_runs(case_scene, ds, ref_scene, R, compare) -> dict:
     cds, fds = (ds, R) if fine_first else (R, ds)
     ci, fi = transfer.mesh_info(coarse_sc, cds), transfer.mesh_info(fine_sc, fds)
     tr = transfer.Transfer(ci, fi)
-    parts = []
+    parts, sizes = [], []
     for t in compare:
         i_c, i_f = snapshot_index(cds, t), snapshot_index(fds, t)
         du = fds.u_dofs.values[i_f] - tr.displacement(cds.u_dofs.values[i_c], cds.u_nodes.values[i_c])
         dsig = fds.stress.values[i_f] - tr.cells(cds.stress.values[i_c])
-        dbeta = None
+        dbeta = beta = None
         if "beta" in ds:
-            dbeta = fds.beta.sel(time=t, method="nearest").values - tr.facets(
-                cds.beta.sel(time=t, method="nearest").values)
+            beta = fds.beta.sel(time=t, method="nearest").values
+            dbeta = beta - tr.facets(cds.beta.sel(time=t, method="nearest").values)
         parts.append(transfer.norms(fi, du, dsig, dbeta))
+        sizes.append(transfer.norms(fi, fds.u_dofs.values[i_f], fds.stress.values[i_f], beta))
     t_rec = ds.time.values
     ref_probe = R.u_probe.sel(time=t_rec, method="nearest").values
     ref_end = far_facet(R.beta).sel(time=t_rec, method="nearest").values if "beta" in ds else None
-    out = _combine(parts, ds, ref_probe, ref_end)
+    out = _combine(parts, ds, ref_probe, ref_end, sizes)
     out["transfer"] = tr.method
     return out
 
@@ -214,28 +215,34 @@ class SolutionReference:
         sol = self.solution(case_scene)
         info = transfer.mesh_info(case_scene)
         t_rec = ds.time.values
-        parts = []
+        parts, sizes = [], []
         for t in compare:
             i = snapshot_index(ds, t)
             u_ref, beta_ref = sol(np.array([t]), x=info.xyz[:, 0])
             ref_vec = np.zeros(info.fes.ndof)
             ref_vec[: len(info.xyz)] = np.ravel(u_ref)  # linear in x: vertex values are the whole field
-            du = ds.u_dofs.values[i] - ref_vec
-            dsig = ds.stress.values[i] - np.ravel(sol.stress(np.array([t])))[0]
-            dbeta = ds.beta.values[np.argmin(np.abs(t_rec - t))] - np.ravel(beta_ref)[0] if "beta" in ds else None
-            parts.append(transfer.norms(info, du, dsig, dbeta))
+            sig_ref = np.full_like(ds.stress.values[i], np.ravel(sol.stress(np.array([t])))[0])
+            beta = np.full(info.facet_measure.shape, np.ravel(beta_ref)[0]) if "beta" in ds else None
+            dbeta = ds.beta.values[np.argmin(np.abs(t_rec - t))] - beta if "beta" in ds else None
+            parts.append(transfer.norms(info, ds.u_dofs.values[i] - ref_vec, ds.stress.values[i] - sig_ref, dbeta))
+            sizes.append(transfer.norms(info, ref_vec, sig_ref, beta))
         xs = ds.probe_x.values
         ref_probe = np.stack([sol(t_rec, x=x)[0] for x in xs], axis=1)[..., None]
         ref_end = sol(t_rec)[1] if "beta" in ds else None
-        return _combine(parts, ds, ref_probe, ref_end)
+        return _combine(parts, ds, ref_probe, ref_end, sizes)
 
 
-def _combine(parts, ds, ref_probe, ref_end) -> dict:
-    parts = np.array(parts)
+def _combine(parts, ds, ref_probe, ref_end, sizes) -> dict:
+    """The errors from the norms of the differences ``parts`` at the compared times, and the reference's own norms
+    there (``sizes``, their largest: ``reference_norm_*``, the scale an error is at round-off against)."""
+    parts, sizes = np.array(parts), np.array(sizes)
     out = {}
     out["error_V"], out["error_Q"] = np.max(parts[:, :2], axis=0)
     out["error_beta"] = float(np.max(parts[:, 2])) if np.isfinite(parts[:, 2]).all() else np.nan
     out["error"] = float(np.max(np.nansum(parts, axis=1)))
+    out["reference_norm_V"], out["reference_norm_Q"] = np.max(sizes[:, :2], axis=0)
+    if np.isfinite(sizes[:, 2]).all():
+        out["reference_norm_beta"] = float(np.max(sizes[:, 2]))
     out["error_probe"] = np.max(np.linalg.norm(ds.u_probe.values - ref_probe, axis=-1), axis=0)
     if ref_end is not None:
         out["error_beta_end"] = float(np.max(np.abs(far_facet(ds.beta).values - ref_end)))
