@@ -146,9 +146,10 @@ def trapezoid_steps(scene, model, k_max: float, name: str) -> None:
 PAPER_P1 = ("tp4", "tp5")
 
 
-def warnings_for(scene, model) -> list:
+def warnings_for(scene, model, used: dict) -> list:
     """Warnings that belong to the scene: P1 simplices lock in bending on a thin body (the block preset's P1 tip
-    was 50 % low at h = 0.05)."""
+    was 50 % low at h = 0.05); and values given that have no effect (``used``: the scheme's :meth:`preflight` record,
+    what it took)."""
     out = []
     g = model.geometry
     # (the paper's own P1 on its presets, however it was given: by default, explicitly, or from a restarted archive)
@@ -157,10 +158,11 @@ def warnings_for(scene, model) -> list:
         out.append(f"{scene.name}: P1 elements on a thin body (thickness / length = {g.aspect():.2g}) lock in bending, "
                    "so displacements come out too small (the block at h = 0.05: 50 %; the slab at h = 0.0125: 5 %); "
                    "order = 2 converges at the same cost")
-    return out + _contact_zone(scene, g) + _quadrature_cost(scene, model) + _unused(scene) + _underived(scene)
+    return (out + _contact_zone(scene, g) + _quadrature_cost(scene, model) + _unused(scene) + _underived(scene)
+            + _ignored_by_the_solver(scene, used))
 
 
-def ignored_by_the_solver(scene, used: dict) -> list:
+def _ignored_by_the_solver(scene, used: dict) -> list:
     """A value the user gave that the contact solver ``auto`` took does not read: ``contact_tol`` where it took the
     condensed solver, which solves each active set exactly (``contact_solver = 'condensed'`` with it is refused
     before the run; ``auto`` decides by the contact points, known once the mesh is made). ``used``: the scheme's

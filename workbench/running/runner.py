@@ -387,8 +387,7 @@ class _Run:
                 self.checks = scheme.preflight(self.steps.k_max)
         self.setup_time = setup.wall
         # (an error-controlled run resolves debonding by its own steps: the fixed-step resolution warning is moot)
-        for message in (preflight.warnings_for(sc, self.model) + preflight.ignored_by_the_solver(sc, self.checks)
-                        + ([] if n.adaptive else scheme.warnings())):
+        for message in preflight.warnings_for(sc, self.model, self.checks) + ([] if n.adaptive else scheme.warnings()):
             warnings.warn(message, RuntimeWarning, stacklevel=4)
         every = n.adaptive  # error-controlled runs keep every step (their short steps are where things happen)
         self.recorder = disc.recording(lambda d: results.Recorder(

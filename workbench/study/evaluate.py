@@ -312,8 +312,7 @@ def study_dataset(study, runs: dict, compare, history: str) -> xr.Dataset:
     orders and the Pareto front (:func:`dataset`), and attributes that say how it was made (``history``: the
     call)."""
     ref = study.reference
-    rows, methods = {}, set()
-    ref_measures = {}
+    rows, methods, ref_measures = {}, set(), {}
     for case in study.listed:
         ds = runs[case]
         a = ds.attrs
