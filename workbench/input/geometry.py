@@ -608,7 +608,9 @@ def _indenter_mesh(kind, R, h, h_contact, contact_zone=CONTACT_ZONE):
     and in the process while it is among the last few used."""
     from .meshes import cached_netgen
 
-    key = f"indenter {kind} R={R!r} h={h!r} h_contact={h_contact!r} zone={contact_zone!r}"
+    # (the faces named by their vertices: a mesh cached before named the zone's wall "curved")
+    key = (f"indenter {kind} R={R!r} h={h!r} h_contact={h_contact!r} zone={contact_zone!r} sides named by their "
+           "vertices")
     return cached_netgen(key, lambda: _make_indenter_mesh(kind, R, h, h_contact, contact_zone))
 
 
@@ -641,13 +643,18 @@ def _remeshed_indenter(kind, R, h, contact_zone, points, sizes, grading):
     return _indenter_geometry(kind, R, h, contact_zone).GenerateMesh(mp=mp)
 
 
-def _on_circle(c, kind, R):
-    """Whether the point ``c`` lies on the indenter's curved side (the circle or sphere of radius R about the centre
-    R above the apex), loosely: it tells the curved edges or faces from the flat ones."""
+def _on_circle(part, kind, R):
+    """Whether the OCC edge or face ``part`` lies on the indenter's curved side (the circle or sphere of radius R
+    about the centre R above the apex): its vertices on it, and its centre near it (a curved part's centre of mass
+    lies inside, the flank's 0.13 R). The centre alone (within 0.1 R) took the wall of the 3D contact zone, inside
+    the body, for the contact side: 40 % of the side's area, on which a glue pulled."""
     import math
 
-    return abs(math.sqrt(c.x ** 2 + c.y ** 2 + c.z ** 2 - 2 * R * (c.y if kind == "halfdisc" else c.z) + R * R)
-               - R) < 0.1 * R
+    def off(p):
+        return abs(math.sqrt(p.x ** 2 + p.y ** 2 + p.z ** 2 - 2 * R * (p.y if kind == "halfdisc" else p.z) + R * R)
+                   - R)
+
+    return off(part.center) < 0.2 * R and all(off(v.p) < 1e-6 * R for v in part.vertices)
 
 
 def _halfdisc_shape(R, h_contact, contact_zone):
@@ -671,7 +678,7 @@ def _halfdisc_shape(R, h_contact, contact_zone):
     for e in shape.edges:
         c = e.center
         e.name = "axis" if abs(c.x) < tol else "top" if abs(c.y - R) < tol \
-            else "curved" if _on_circle(c, "halfdisc", R) \
+            else "curved" if _on_circle(e, "halfdisc", R) \
             else "interface"  # (between the zone and the rest: not a boundary of the body)
         if e.name == "curved":
             if c.x < w:
@@ -702,12 +709,14 @@ def _quarter_ball_shape(R, h_contact, contact_zone):
             f.name = "symy"
         elif abs(c.z - R) < tol:
             f.name = "top"
-        elif _on_circle(c, "hemisphere", R) and math.hypot(c.x, c.y) < w:
+        elif _on_circle(f, "hemisphere", R) and math.hypot(c.x, c.y) < w:
             f.name, f.maxh = "curved", h_contact
-        elif _on_circle(c, "hemisphere", R):
+        elif _on_circle(f, "hemisphere", R):
             f.name = "flank"
         else:
             f.name = "interface"
+            if c.z < w / 2 - tol:  # (the zone's wall keeps the size it had when taken for the contact side, so
+                f.maxh = h_contact  # the meshes, and what was measured on them, are the same)
     return shape
 
 
