@@ -146,10 +146,10 @@ def trapezoid_steps(scene, model, k_max: float, name: str) -> None:
 PAPER_P1 = ("tp4", "tp5")
 
 
-def warnings_for(scene, model, used: dict) -> list:
+def warnings_for(scene, model, used: dict | None = None) -> list:
     """Warnings that belong to the scene: P1 simplices lock in bending on a thin body (the block preset's P1 tip
     was 50 % low at h = 0.05); and values given that have no effect (``used``: the scheme's :meth:`preflight` record,
-    what it took)."""
+    what it took, where it is built)."""
     out = []
     g = model.geometry
     # (the paper's own P1 on its presets, however it was given: by default, explicitly, or from a restarted archive)
@@ -159,7 +159,7 @@ def warnings_for(scene, model, used: dict) -> list:
                    "so displacements come out too small (the block at h = 0.05: 50 %; the slab at h = 0.0125: 5 %); "
                    "order = 2 converges at the same cost")
     return (out + _contact_zone(scene, g) + _quadrature_cost(scene, model) + _unused(scene) + _underived(scene)
-            + _ignored_by_the_solver(scene, used))
+            + _ignored_by_the_solver(scene, used or {}))
 
 
 def _ignored_by_the_solver(scene, used: dict) -> list:
