@@ -8,9 +8,18 @@ Frictionless contact of an elastic body of radius R with a rigid plane, pressed 
 
 For a linear viscoelastic body whose contact area does not shrink (Lee and Radok), 1/E* is replaced
 by the creep compliance: a(t)^2 = (4 R / pi) int_0^t J*(t - s) dP(s) for the cylinder and
-a(t)^3 = (3 R / 4) int_0^t J*(t - s) dP(s) for the sphere, and the pressure at each time is Hertz's
-for that a. For a Kelvin-Voigt body whose viscous tensor is tau times its elastic one,
-J*(t) = (1 - exp(-t / tau)) / E*.
+a(t)^3 = (3 R / 4) int_0^t J*(t - s) dP(s) for the sphere, and the pressure is the body's relaxation
+operator applied to the elastic pressure of the growing a. For a Kelvin-Voigt body whose viscous
+tensor is tau times its elastic one, J*(t) = (1 - exp(-t / tau)) / E*, the operator is 1 + tau d/dt,
+and with a^k the solution of tau (a^k)' + a^k = c_k P (k = 2, c_2 = 4 R / (pi E*); k = 3,
+c_3 = 3 R / (4 E*)), the pressure is the elastic one plus tau a a' over the root:
+
+* cylinder: p(x) = (E* / 2R) [sqrt(a^2 - x^2) + q / sqrt(a^2 - x^2)], q = (c_2 P - a^2) / 2;
+* sphere: p(r) = (2 E* / (pi R)) [sqrt(a^2 - r^2) + q / sqrt(a^2 - r^2)], q = (c_3 P - a^3) / (3 a).
+
+While the contact grows the edge carries an inverse square root, and the elastic part alone carries
+a^k / (c_k P) of the load (0.95 for the ``hertz`` scene's tau = 0.05 under its ramp at t = 1).
+:func:`kelvin_voigt` gives (a, p) for any load from rest.
 
 These are the references of the ``hertz`` scenes (half-space theory: a << R); :func:`profile`
 reads a run's contact pressure against them.
@@ -57,6 +66,50 @@ def lee_radok(t: float, rate: float, R: float, E: float, nu: float, tau: float, 
     return (0.75 * R * creep) ** (1.0 / 3.0)
 
 
+def kelvin_voigt(load, t: float, R: float, E: float, nu: float, tau: float, body: str = "cylinder"):
+    """(a, p) of Lee and Radok at time ``t`` for a Kelvin-Voigt body with A = ``tau`` G pressed from rest by
+    ``load(t)`` (module docs; tau = 0: Hertz's). A ParameterError where the contact shrank before t (Lee and Radok's
+    solution holds while it grows).
+
+    >>> a, p = kelvin_voigt(lambda t: 10.0 * t, 1.0, 1.0, 1000.0, 0.3, 0.05)  # (the hertz scene at t = 1)
+    >>> a_elastic, p_elastic = cylinder(10.0, 1.0, 1000.0, 0.3)
+    >>> round(a / lee_radok(1.0, 10.0, 1.0, 1000.0, 0.3, 0.05), 12), round(a / a_elastic, 4)
+    (1.0, 0.9747)
+    >>> round(float(p(0.0) / p_elastic(0.0)), 4), float(p(a)), bool(p(0.9999 * a) > p_elastic(0.0))
+    (1.0003, 0.0, True)
+    """
+    from ..errors import ParameterError
+
+    k, c = (2, 4.0 * R / (math.pi * reduced_modulus(E, nu))) if body == "cylinder" else \
+        (3, 0.75 * R / reduced_modulus(E, nu))
+    times = np.linspace(0.0, t, 201)[1:]
+    grown = np.array([_relaxed(load, s, tau) for s in times]) * c  # a^k at those times
+    if np.any(np.diff(grown) < -1e-9 * np.abs(grown).max()) or grown[-1] <= 0:
+        raise ParameterError(f"hertz: the contact shrinks before t = {t:g} s under this load: Lee and Radok's pressure "
+                             "holds while it grows")
+    size = float(grown[-1])
+    a = size ** (1.0 / k)
+    q = (c * load(t) - size) / 2.0 if k == 2 else (c * load(t) - size) / (3.0 * a)  # (tau a a')
+    scale = reduced_modulus(E, nu) / (2.0 * R) if k == 2 else 2.0 * reduced_modulus(E, nu) / (math.pi * R)
+
+    def p(r):
+        root = np.sqrt(np.maximum(a * a - np.asarray(r, dtype=float) ** 2, 0.0))
+        with np.errstate(divide="ignore", invalid="ignore"):
+            return np.where(root > 0, scale * (root + q / root), 0.0)
+
+    return a, p
+
+
+def _relaxed(load, t: float, tau: float) -> float:
+    """(1 / tau) int_0^t e^(-(t - s) / tau) load(s) ds, the solution from 0 of tau y' + y = load (load(t) at tau = 0)."""
+    if tau <= 0.0:
+        return float(load(t))
+    from scipy.integrate import quad
+
+    return quad(lambda s: math.exp(-(t - s) / tau) * float(load(s)), max(0.0, t - 60.0 * tau), t, limit=200,
+                epsabs=0.0, epsrel=1e-12)[0] / tau
+
+
 def profile(ds, time=None, variable: str = "contact_pressure"):
     """The contact pressure of a ``hertz`` run at ``time`` (default: its last) against Hertz's for the load then
     (``variable``: the lumped nodal pressure, or ``contact_pressure_recovered``, its patch average).
@@ -74,20 +127,23 @@ def profile(ds, time=None, variable: str = "contact_pressure"):
     i = -1 if time is None else int(np.argmin(np.abs(ds.time.values - time)))
     t = float(ds.time.values[i])
     refused = _not_hertz(a_)
-    P = float(parse(a_["load"], name="load", allowed=("t",))(t=t)) if not refused else 0.0
+    load = parse(a_["load"], name="load", allowed=("t",)) if not refused else None
+    P = float(load(t=t)) if not refused else 0.0
     if refused or not P > 0:
         raise ParameterError(f"hertz.profile: {refused or f'the load at t = {t:g} s is {P:g}: nothing presses'}")
     R, E, nu = float(a_["radius"]), float(a_["E"]), float(a_["nu"])
-    if a_.get("plane") == "stress" and "node_z" not in ds.coords:
-        nu = 0.0  # (plane stress: the half-plane's modulus is E itself, E* = E / (1 - nu^2) is plane strain's)
     three = "node_z" in ds.coords
+    tau = _viscous_time(a_, three)
+    if a_.get("plane") == "stress" and not three:
+        nu = 0.0  # (plane stress: the half-plane's modulus is E itself, E* = E / (1 - nu^2) is plane strain's)
+    body = "sphere" if three else "cylinder"
+    a, p_of = kelvin_voigt(lambda s: float(load(t=s)), t, R, E, nu, tau, body) if tau > 0 else \
+        (sphere if three else cylinder)(P, R, E, nu)
     if three:
         r = np.hypot(ds.node_x.values, ds.node_y.values)
-        a, p_of = sphere(P, R, E, nu)
         share = P / 4.0  # the quarter x, y >= 0
     else:
         r = np.abs(ds.node_x.values)
-        a, p_of = cylinder(P, R, E, nu)
         share = P / 2.0  # the half x >= 0
     p = ds[variable].values[i]
     w = ds.node_weight.values
@@ -99,20 +155,42 @@ def profile(ds, time=None, variable: str = "contact_pressure"):
     order = np.argsort(r)
     r, p, w = r[order], p[order], w[order]
     ph = p_of(r)
-    near = r <= 2.0 * a
+    # (a viscous body's pressure has an inverse square root at the growing edge, whose square is not integrable)
+    within = 0.9 if tau > 0 else 2.0
+    near = r <= within * a
     touching = p > 0
     # Hertz's p^2 is linear in r^2, vanishing at a: fitted on the vertices in contact (the outermost one, whose
     # lumped pressure averages over the edge, left out), a = sqrt(-intercept / slope)
     # (the apex left out too: it is held, and its pressure is a reaction)
     fit = touching & (r > 0) & (r < r[touching].max()) if touching.sum() > 4 else touching & (r > 0)
     a_fit = float("nan")
-    if fit.sum() >= 2:
+    if fit.sum() >= 2 and tau == 0:
         slope, intercept = np.polyfit(r[fit] ** 2, p[fit] ** 2, 1)
         a_fit = float(np.sqrt(-intercept / slope)) if slope < 0 < intercept else float("nan")
     return {"t": t, "load": P, "a": a, "a_fit": a_fit, "a_last": float(r[touching].max()) if touching.any() else 0.0,
             "a_next": float(r[~touching & (r > 0)].min()) if (~touching).any() else float("nan"),
             "l2": float(np.sqrt(np.sum(w[near] * (p - ph)[near] ** 2) / np.sum(w[near] * ph[near] ** 2))),
+            "l2_within": within, "tau": tau,
             "force": float(np.sum(w * p) / share), "x": r, "p": p, "p_hertz": ph}
+
+
+def _viscous_time(attrs, three: bool) -> float:
+    """tau of a run's Kelvin-Voigt body with A = tau G (Model A's Hertz scenes derive a1, a2 from their tau), 0 for
+    an elastic one (Model B without memory); a ParameterError where the viscous tensor is no multiple of G (Lee and
+    Radok's solution here is for A = tau G)."""
+    from ..errors import ParameterError
+    from ..physics.kelvin_voigt import lame_moduli, plane_stress_moduli
+
+    a1, a2 = float(attrs.get("a1") or 0.0), float(attrs.get("a2") or 0.0)
+    if a1 == 0.0 and a2 == 0.0:
+        return 0.0
+    stress = attrs.get("plane") == "stress" and not three
+    lam, two_mu = (plane_stress_moduli if stress else lame_moduli)(float(attrs["E"]), float(attrs["nu"]))
+    tau = a2 / two_mu
+    if attrs.get("viscous_tensor", "[]") not in ("[]", "", "()") or abs(a1 - tau * lam) > 1e-9 * max(a1, a2):
+        raise ParameterError(f"hertz.profile: the run's viscous tensor (a1 = {a1:g}, a2 = {a2:g}) is no multiple of "
+                             "its elastic one: Lee and Radok's pressure here is that of A = tau G (give tau)")
+    return tau
 
 
 def _not_hertz(attrs) -> str:
