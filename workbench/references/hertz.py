@@ -101,7 +101,8 @@ def kelvin_voigt(load, t: float, R: float, E: float, nu: float, tau: float, body
 
 
 def _relaxed(load, t: float, tau: float) -> float:
-    """(1 / tau) int_0^t e^(-(t - s) / tau) load(s) ds, the solution from 0 of tau y' + y = load (load(t) at tau = 0)."""
+    """(1 / tau) int_0^t e^(-(t - s) / tau) load(s) ds: the solution from 0 of tau y' + y = load (load(t) at
+    tau = 0)."""
     if tau <= 0.0:
         return float(load(t))
     from scipy.integrate import quad
