@@ -173,6 +173,8 @@ class Factor:
         self.schur, self._schur_factor = None, None
         out = np.zeros(1)
         if self.keep is not None:
+            if self.n - self.keep.size < 2:  # (MKL's Schur complement then reads memory it never wrote: _schur)
+                raise ValueError(f"a factor keeping {self.keep.size} of {self.n} unknowns: keep at most n - 2")
             self._iparm[35] = 2  # the Schur complement, and the factor of the other unknowns kept for solves in parts
             self._perm = np.zeros(self.n, dtype=np.int64)
             self._perm[self.keep] = 1
@@ -247,7 +249,11 @@ def compliance(A: sp.spmatrix, B: sp.spmatrix) -> np.ndarray:
 
 
 def _schur(matrix, n: int, mtype: int, keep: np.ndarray) -> np.ndarray:
-    """The dense Schur complement on the sorted unknowns ``keep`` (one handle, released at once)."""
+    """The dense Schur complement on the sorted unknowns ``keep`` (one handle, released at once). Where one unknown
+    is left to eliminate, by dense algebra: MKL's Schur complement then reads memory it never wrote, and crashed the
+    process (the rod at h = 0.5, its two free dofs and one contact dof; deterministic with MALLOC_PERTURB_ set)."""
+    if n - keep.size < 2:
+        return _dense_schur(matrix, n, keep)
     if not available():
         raise RuntimeError("MKL PARDISO is not available here (install the 'mkl' wheel)")
     pt, iparm = np.zeros(64, dtype=np.int64), _parameters(True)
@@ -258,4 +264,17 @@ def _schur(matrix, n: int, mtype: int, keep: np.ndarray) -> np.ndarray:
         _call(pt, mtype, 12, n, matrix, iparm, np.zeros(1), S, 1, perm)
     finally:
         _release(pt, mtype, n, iparm)
+    return S
+
+
+def _dense_schur(matrix, n: int, keep: np.ndarray) -> np.ndarray:
+    """A_kk - A_ko A_oo^-1 A_ok from the upper triangle (:func:`_upper`'s triple), densely: for a matrix with one
+    unknown (or none) outside ``keep``."""
+    data, indptr, indices = matrix
+    U = sp.csr_matrix((data, indices, indptr), shape=(n, n)).toarray()
+    A = U + np.triu(U, 1).T
+    other = np.setdiff1d(np.arange(n), keep)
+    S = A[np.ix_(keep, keep)]
+    if other.size:
+        S = S - A[np.ix_(keep, other)] @ np.linalg.solve(A[np.ix_(other, other)], A[np.ix_(other, keep)])
     return S
