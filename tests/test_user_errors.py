@@ -969,6 +969,20 @@ def test_a_value_that_acts_only_with_another_that_is_off_is_warned_about(scene, 
         workbench.run(scene, progress=False, **on)
 
 
+def test_a_kernel_the_exponentials_do_not_fit_within_kernel_tol_is_warned_about():
+    """kernel_approximation = 'exponentials' on cos(20 t) fits to 6.7e-2 with 32 terms, not to kernel_tol = 1e-6:
+    the archive's kernel_fit_error said so, the run did not. A kernel that fits (exp(-t)) says nothing."""
+    values = dict(h=0.25, k=0.05, T=1.0, kernel_E=0.5, prony=(), kernel_approximation="exponentials")
+    with pytest.warns(RuntimeWarning, match=r"fits the kernel to 0\.067 of its largest value with 32 terms on "
+                                            r"\[0, 1\] s, not to kernel_tol = 1e-06"):
+        ds = workbench.run("memory_rod", kernel="cos(20*t)", progress=False, **values)
+    assert ds.attrs["kernel_fit_error"] > 1e-6
+    with warnings.catch_warnings():
+        warnings.simplefilter("error", RuntimeWarning)
+        ds = workbench.run("memory_rod", kernel="exp(-t)", progress=False, **values)
+    assert ds.attrs["kernel_fit_error"] <= 1e-6
+
+
 def test_a_contact_tol_the_solver_auto_took_does_not_read_is_warned_about():
     """contact_tol with contact_solver = 'auto' on few points (the condensed solver, exact per active set) was
     recorded in the archive and ignored without a word; with 'condensed' it is refused before the run."""

@@ -158,8 +158,8 @@ def warnings_for(scene, model, used: dict | None = None) -> list:
         out.append(f"{scene.name}: P1 elements on a thin body (thickness / length = {g.aspect():.2g}) lock in bending, "
                    "so displacements come out too small (the block at h = 0.05: 50 %; the slab at h = 0.0125: 5 %); "
                    "order = 2 converges at the same cost")
-    return (out + _contact_zone(scene, g) + _quadrature_cost(scene, model) + _unused(scene) + _underived(scene)
-            + _ignored_by_the_solver(scene, used or {}))
+    return (out + _contact_zone(scene, g) + _quadrature_cost(scene, model) + _kernel_fit(scene, model)
+            + _unused(scene) + _underived(scene) + _ignored_by_the_solver(scene, used or {}))
 
 
 def _ignored_by_the_solver(scene, used: dict) -> list:
@@ -214,6 +214,18 @@ def _underived(scene) -> list:
 QUADRATURE_COST = 3e-9
 #: Steps of the quadrature memory beyond which its O(n^2) cost is said.
 QUADRATURE_STEPS = 20000
+
+
+def _kernel_fit(scene, model) -> list:
+    """A kernel that sums of exponentials do not fit within kernel_tol (cos(20 t): 6.7e-2 with 32 terms, against
+    1e-6 asked): the run then has the fitted sum's memory, which the archive's kernel_fit_error recorded without a
+    word."""
+    fit = model.memory.fit if model.memory is not None else None
+    if not fit or fit["error"] <= fit["tol"]:
+        return []
+    return [f"{scene.name}: kernel_approximation = 'exponentials' fits the kernel to {fit['error']:.2g} of its largest "
+            f"value with {fit['terms']} terms on [0, {fit['T']:g}] s, not to kernel_tol = {fit['tol']:g}: the memory is "
+            "that of the fitted sum; kernel_approximation = 'quadrature' integrates the kernel itself"]
 
 
 def _quadrature_cost(scene, model) -> list:
