@@ -382,9 +382,12 @@ class ZonePrediction:
     load steps: 6, 6, 2, 6 points wrong of 115-287 (the exact active set then took 3, 3, 2, 3 iterations from it,
     against 14, 6, 4, 6 from the last step's states).
 
-    Above :attr:`HalfSpace.largest` points the problem is first solved on clusters of points (a grid of cells,
+    Above half :attr:`HalfSpace.largest` points the problem is first solved on clusters of points (a grid of cells,
     about :attr:`clusters` of them; their forces summed, displacements averaged), and then on the points of the
-    clusters in contact and their neighbours. A zone larger than :attr:`HalfSpace.largest` is not predicted; a model
+    clusters in contact and their neighbours. (Up to the whole of it, the model on every point had been solved at
+    once: its active set factors the model's block each iteration, updated at low rank, and on the hemisphere at
+    47k dofs, 3085 points of which 1182 touch, that took 2.7 s of a 6.5 s run, against 4.5 s by the clusters, with
+    the same 78 back-substitutions.) A zone larger than :attr:`HalfSpace.largest` is not predicted; a model
     whose active set cycles twice running is dropped for the run.
     """
 
@@ -417,7 +420,7 @@ class ZonePrediction:
 
     def _predict(self, c, b, lam0, rho):
         half, w = self.half, self.half.w
-        if w.size <= half.largest:
+        if w.size <= half.largest // 2:  # (class docs: beyond, the clusters first)
             C, states = np.arange(w.size), None
         else:
             C, states = self._on_clusters(c, b, lam0, rho)
