@@ -115,31 +115,17 @@ def profile(ds, time=None, variable: str = "contact_pressure"):
     """The contact pressure of a ``hertz`` run at ``time`` (default: its last) against Hertz's for the load then
     (``variable``: the lumped nodal pressure, or ``contact_pressure_recovered``, its patch average).
 
-    Returns a dict: ``a`` (Hertz), ``a_last`` / ``a_next`` (the farthest contact point with a positive
+    A Kelvin-Voigt body (A = tau G) is compared with Lee and Radok's solution (:func:`kelvin_voigt`; module docs).
+    Returns a dict: ``a`` (Hertz's, or Lee and Radok's), ``a_last`` / ``a_next`` (the farthest contact point with a positive
     pressure, the nearest without; the points are the vertices, and on P2 Model B's facet midpoints too), ``a_fit`` (the half-width of the Hertz profile fitted to the pressure:
-    p^2 linear in r^2), ``l2`` (the relative L2 error of the pressure over the contact side
-    within 2 a, by the nodal weights), ``force`` (the contact force over the load's share that the modelled
+    p^2 linear in r^2; NaN for a viscous body), ``l2`` (the relative L2 error of the pressure over the contact side
+    within ``l2_within`` a, 2, or 0.9 for a viscous body, by the nodal weights), ``tau``, ``force`` (the contact force over the load's share that the modelled
     part carries), ``x``, ``p``, ``p_hertz`` (by distance from the apex).
     """
-    from ..errors import ParameterError
-    from ..expressions import parse
-
-    a_ = ds.attrs
     i = -1 if time is None else int(np.argmin(np.abs(ds.time.values - time)))
     t = float(ds.time.values[i])
-    refused = _not_hertz(a_)
-    load = parse(a_["load"], name="load", allowed=("t",)) if not refused else None
-    P = float(load(t=t)) if not refused else 0.0
-    if refused or not P > 0:
-        raise ParameterError(f"hertz.profile: {refused or f'the load at t = {t:g} s is {P:g}: nothing presses'}")
-    R, E, nu = float(a_["radius"]), float(a_["E"]), float(a_["nu"])
     three = "node_z" in ds.coords
-    tau = _viscous_time(a_, three)
-    if a_.get("plane") == "stress" and not three:
-        nu = 0.0  # (plane stress: the half-plane's modulus is E itself, E* = E / (1 - nu^2) is plane strain's)
-    body = "sphere" if three else "cylinder"
-    a, p_of = kelvin_voigt(lambda s: float(load(t=s)), t, R, E, nu, tau, body) if tau > 0 else \
-        (sphere if three else cylinder)(P, R, E, nu)
+    P, tau, (a, p_of) = _reference(ds.attrs, t, three)
     if three:
         r = np.hypot(ds.node_x.values, ds.node_y.values)
         share = P / 4.0  # the quarter x, y >= 0
@@ -173,6 +159,26 @@ def profile(ds, time=None, variable: str = "contact_pressure"):
             "l2": float(np.sqrt(np.sum(w[near] * (p - ph)[near] ** 2) / np.sum(w[near] * ph[near] ** 2))),
             "l2_within": within, "tau": tau,
             "force": float(np.sum(w * p) / share), "x": r, "p": p, "p_hertz": ph}
+
+
+def _reference(attrs, t: float, three: bool):
+    """(P, tau, (a, p)) of a run's Hertz problem at ``t`` (:func:`profile`): the load then, the body's viscous time,
+    Hertz's or Lee and Radok's solution; a ParameterError naming why a run is none."""
+    from ..errors import ParameterError
+    from ..expressions import parse
+
+    refused = _not_hertz(attrs)
+    load = parse(attrs["load"], name="load", allowed=("t",)) if not refused else None
+    P = float(load(t=t)) if not refused else 0.0
+    if refused or not P > 0:
+        raise ParameterError(f"hertz.profile: {refused or f'the load at t = {t:g} s is {P:g}: nothing presses'}")
+    R, E, nu = float(attrs["radius"]), float(attrs["E"]), float(attrs["nu"])
+    tau = _viscous_time(attrs, three)
+    if attrs.get("plane") == "stress" and not three:
+        nu = 0.0  # (plane stress: the half-plane's modulus is E itself, E* = E / (1 - nu^2) is plane strain's)
+    if tau > 0:
+        return P, tau, kelvin_voigt(lambda s: float(load(t=s)), t, R, E, nu, tau, "sphere" if three else "cylinder")
+    return P, tau, (sphere if three else cylinder)(P, R, E, nu)
 
 
 def _viscous_time(attrs, three: bool) -> float:
