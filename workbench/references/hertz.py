@@ -113,14 +113,15 @@ def _relaxed(load, t: float, tau: float) -> float:
 
 def profile(ds, time=None, variable: str = "contact_pressure"):
     """The contact pressure of a ``hertz`` run at ``time`` (default: its last) against Hertz's for the load then
-    (``variable``: the lumped nodal pressure, or ``contact_pressure_recovered``, its patch average).
+    (``variable``: the lumped nodal pressure, or ``contact_pressure_recovered``, its patch average). A Kelvin-Voigt
+    body (A = tau G) is compared with Lee and Radok's solution (:func:`kelvin_voigt`; module docs).
 
-    A Kelvin-Voigt body (A = tau G) is compared with Lee and Radok's solution (:func:`kelvin_voigt`; module docs).
-    Returns a dict: ``a`` (Hertz's, or Lee and Radok's), ``a_last`` / ``a_next`` (the farthest contact point with a positive
-    pressure, the nearest without; the points are the vertices, and on P2 Model B's facet midpoints too), ``a_fit`` (the half-width of the Hertz profile fitted to the pressure:
-    p^2 linear in r^2; NaN for a viscous body), ``l2`` (the relative L2 error of the pressure over the contact side
-    within ``l2_within`` a, 2, or 0.9 for a viscous body, by the nodal weights), ``tau``, ``force`` (the contact force over the load's share that the modelled
-    part carries), ``x``, ``p``, ``p_hertz`` (by distance from the apex).
+    Returns a dict: ``a`` (Hertz's, or Lee and Radok's), ``a_last`` / ``a_next`` (the farthest contact point with a
+    positive pressure, the nearest without; the points are the vertices, and on P2 Model B's facet midpoints too),
+    ``a_fit`` (the half-width of the Hertz profile fitted to the pressure: p^2 linear in r^2; NaN for a viscous
+    body), ``l2`` (the relative L2 error of the pressure over the contact side within ``l2_within`` a, 2, or 0.9 for
+    a viscous body, by the nodal weights), ``tau``, ``force`` (the contact force over the load's share that the
+    modelled part carries), ``x``, ``p``, ``p_hertz`` (by distance from the apex).
     """
     i = -1 if time is None else int(np.argmin(np.abs(ds.time.values - time)))
     t = float(ds.time.values[i])
