@@ -111,6 +111,20 @@ def test_a_zone_that_outgrows_what_the_condensed_solver_affords_is_handed_to_the
     assert auto.linear_iterations.values[:2].max() == 0 and auto.linear_iterations.values[2:].min() > 0
 
 
+def test_a_zone_that_outgrows_the_candidates_with_few_steps_left_goes_to_the_coupled_solver(monkeypatch):
+    """Every point's dense work is worth it only against the coupled solver's steps left (``Candidates._grows``): at
+    106k dofs the zone outgrew 2286 candidates in the last of 4 steps, and solving on all 6410 points took the run
+    to 25.0 s, against 14.6 s for the coupled solver alone. Here that work made to cost more than the 3 steps left
+    after the miss: the coupled solver takes over, equal to the condensed solver to its tolerance; with the work
+    as it is, every point (the test above)."""
+    monkeypatch.setattr(Candidates, "most", classmethod(lambda cls, ndof, method, steps: 150))
+    kw = dict(h_contact=0.01, progress=False)
+    monkeypatch.setattr(Candidates, "growth", 200.0)  # (8 x (766 / 863)^3 = 5.6 back-substitutions: now 140 > 60)
+    auto = workbench.run("memory_hertz3d", **kw)
+    assert auto.attrs["contact_candidates"] == 150 and auto.attrs["contact_candidates_missed"] == 1
+    _agree(auto, workbench.run("memory_hertz3d", contact_solver="condensed", **kw), tol=1e-7)
+
+
 def test_the_candidates_with_a_compliant_layer_memory_and_a_load_at_t0():
     """Unlike the Signorini ramp: the full load from t = 0, a compliant layer (gap 0.002, F = 5, c = 1e4: stuck,
     compliant and rigid points) and a Prony memory. Against the condensed solver, to 1e-9."""

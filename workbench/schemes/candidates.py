@@ -7,9 +7,10 @@ solves in two parts around them, and a step is the condensed solver's: the free 
 part, the inequality solved densely on P with the other points Q held apart, and u everywhere from the second part,
 one solve's work in all. That u is the whole body's, so the assumption is checked exactly: where no point of Q then
 meets the foundation, the forces found on P (and none on Q) solve the whole inequality. Where one does, the
-factorization is made again keeping every point, where the condensed solver affords them all, and the step solved on
-them; else the step is solved again by the coupled solver (one more back-substitution for the free displacement,
-warm started from the forces found on P), and the candidates are given up for the run.
+factorization is made again keeping every point, where the condensed solver affords them all and their dense work
+costs less than the coupled solver's steps left, and the step solved on them; else the step is solved again by the
+coupled solver (one more back-substitution for the free displacement, warm started from the forces found on P), and
+the candidates are given up for the run.
 
 Measured on the hemisphere from rest to the full load in 4 steps (docs/schemes.md, "The candidate points"): at 47k
 dofs, with 5186 contact vertices and 1182 in contact at the end, the 1590 candidates cost the factorization about
@@ -50,9 +51,10 @@ class Candidates:
         The candidates, positions among ``nodes``.
     """
 
-    def __init__(self, nodes, P: np.ndarray, whole: bool = False):
+    def __init__(self, nodes, P: np.ndarray, whole: float = 0.0):
         self.nodes, self.P = nodes, np.asarray(P)
-        #: Whether the condensed solver affords every point, should the zone outgrow the candidates (:meth:`of`).
+        #: What every point's dense work costs, in back-substitutions, where the condensed solver affords them all
+        #: should the zone outgrow the candidates (:meth:`of`); 0 where it does not (:meth:`_grows`).
         self.whole = whole
         #: Whether a point of Q met the foundation where every point was not affordable: the coupled solver takes
         #: over for the run.
@@ -88,7 +90,25 @@ class Candidates:
         P = cls.choose(nodes.g0, cls.most(d.ndof, method, steps))
         # (every point, with the smaller of its two systems (ContactNodes._state_solution), costs the condensed solver
         # at most an eighth of the dense work of condensed_up_to's rule: twice its points)
-        return None if P is None else cls(nodes, P, nodes.size <= 2 * dense_points(d.ndof, method, 3.0))
+        whole = cls.growth * (nodes.size / dense_points(d.ndof, method, 1.0)) ** 3 \
+            if nodes.size <= 2 * dense_points(d.ndof, method, 3.0) else 0.0
+        return None if P is None else cls(nodes, P, whole)
+
+    #: A coupled step's back-substitutions, and the dense work of every point (the factorization keeping them, their
+    #: compliance, the active set on them) in their dense Cholesky factor's (:meth:`_grows`).
+    coupled_step, growth = 20.0, 8.0
+
+    def _grows(self, time: float) -> bool:
+        """Whether the zone that outgrew the candidates at ``time`` is solved on every point from then: where the
+        condensed solver affords them (``whole``) and their dense work costs less than the coupled solver's steps
+        left. Measured on the hemisphere at 106k dofs (6410 points, 2286 candidates, outgrown in the last of 4
+        steps): every point took the run to 25.0 s, against 14.6 s for the coupled solver alone; their dense work
+        was about 170 back-substitutions, 8 times their Cholesky factor's 22."""
+        if not self.whole:
+            return False
+        n = self.nodes.d.numerics
+        left = np.inf if n.adaptive else max(1.0, (n.T - time) / n.k + 1.0)
+        return self.whole <= self.coupled_step * left
 
     #: As many candidates as a dense Cholesky factor of this many back-substitutions' cost
     #: (:func:`~workbench.schemes.halfspace.dense_points`) per this many steps, within these bounds (:meth:`most`).
@@ -166,7 +186,7 @@ class Candidates:
         nodes.states, nodes.lam = states, forces
         if not np.any(states[Q] != SEPARATED):
             return iterations
-        grown = self._keep(solver, np.arange(nodes.size), again=True) if self.whole else None
+        grown = self._keep(solver, np.arange(nodes.size), again=True) if self._grows(time) else None
         if grown is not None:  # (every point then: no check left, and the step again from its start)
             operator[:] = grown
             return self.equilibrium(operator, rhs, u, time)
