@@ -707,6 +707,12 @@ def build_inputs():  # noqa: C901 (a long list, on purpose)
         quick=True)
     add("tb_prony_none_as_the_table_shows", "own", "run", RUN("memory_rod", "--set", "prony=none", "-o", "out.nc"),
         quick=True)
+    # (the fifth and sixth outside passes, 2026-12: a segmentation fault in MKL's Schur complement on the coarsest rod)
+    add("tb_rod_of_two_cells_implicit", "own", "run", RUN("tp1", "--h", "0.5", "--set", "scheme=implicit", "-o",
+                                                         "out.nc"), quick=True)
+    add("tb_memory_rod_of_two_cells_fitted_kernel", "own", "run",
+        RUN("memory_rod", "--h", "0.5", "--k", "0.01", "--set", "kernel=cos(20*t)", "--set", "kernel_E=0.5", "--set",
+            "prony=none", "--set", "kernel_approximation=exponentials", "-o", "out.nc"))
     add("sa_study_sweep_of_T", "own", "refuse-naming:T",
         ["study", "rod", "--k", "0.04", "0.02", "--sweep", "T=0.5,1", "--workers", "0", "--no-progress"])
     add("tb_hertz_load_1_over_t", I, "either-naming:load", RUN("hertz", "--set", "load=1/t"))
