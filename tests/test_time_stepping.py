@@ -6,6 +6,8 @@ solution of the semi-discrete linear Kelvin-Voigt system by generalised eigenvec
 (workbench.references.rod_memory); SciPy's Radau on the rod ODE (rod_ode); for the slab a
 fixed-step BDF2 run at a step 20-200 times below the adaptive ones, interpolated by a cubic spline.
 """
+import re
+
 import numpy as np
 import pytest
 from scipy.interpolate import CubicSpline
@@ -282,6 +284,9 @@ def test_k_below_k_min_stops_clearly_and_keeps_the_run():
     Dataset of what was computed comes with it, marked incomplete."""
     with pytest.raises(StepTooSmall, match="k_min") as info:
         workbench.run("tp3", scheme="implicit", k=0.05, rtol=1e-6, k_min=0.02, progress=False)
+    # (the step tried may lie above k_min: the one asked for next is said too, below it)
+    asked = float(re.search(r"asks for ([0-9.e+-]+) s next", str(info.value)).group(1))
+    assert asked < 0.02
     ds = info.value.dataset
     assert ds.attrs["status"] == "incomplete" and ds.attrs["failure_type"] == "StepTooSmall"
     assert ds.sizes["time"] >= 1 and "step_size" in ds

@@ -324,8 +324,8 @@ class AdaptiveSteps:
             floor = self.k_min == self.k_floor
             raise StepTooSmall(f"error control needs a step below k_min = {self.k_min:.3g} s"
                                f"{' (the smallest step time resolves here)' if floor else ''} at t = {self.t:.6g} s "
-                               f"({why} with k = {k:.3g} s): loosen rtol/atol, {'' if floor else 'lower k_min, '}"
-                               "or check the scene", time=self.t)
+                               f"({why} with k = {k:.3g} s, and it asks for {new:.3g} s next): loosen rtol/atol, "
+                               f"{'' if floor else 'lower k_min, '}or check the scene", time=self.t)
         self.k = new if theta is not None else self._quantize(new)
 
     def judge(self, err, theta, crossed=0.0) -> bool:
