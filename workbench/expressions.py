@@ -123,6 +123,26 @@ class Expression:
     def __str__(self) -> str:
         return self.source
 
+    def kinks(self, T: float, samples: int = 20001) -> list:
+        """The times in (0, T) where the expression stops being smooth in t: the zeros of ``ifpos``'s condition and
+        of ``abs``'s argument, where these depend on t alone (a ramp held from t = 0.3, ``ifpos(t - 0.3, 0.3, t)``:
+        [0.3]). Sign changes on ``samples`` times, each then bisected to round-off; a zero the sign does not cross
+        (a touch) is not found. Error control lands on them (:class:`~workbench.schemes.stepping.AdaptiveSteps`).
+
+        >>> parse("-0.6*ifpos(t - 0.3, 0.3, t)").kinks(1.0)
+        [0.3]
+        >>> [round(k, 12) for k in parse("(0, abs(sin(pi*t)) + ifpos(x - 0.5, t, 0))").kinks(2.5)]
+        [1.0, 2.0]
+        """
+        found = set()
+        for term in self.terms:
+            for node in ast.walk(term):
+                if isinstance(node, ast.Call) and node.func.id in ("ifpos", "abs"):
+                    argument = node.args[0]
+                    if {n.id for n in ast.walk(argument) if isinstance(n, ast.Name)} <= {"t", "pi", *FUNCTIONS}:
+                        found.update(_sign_changes(argument, T, samples))
+        return sorted(found)
+
     def __getstate__(self):  # (pickled to study workers: code objects do not pickle; they are compiled again there)
         return {k: v for k, v in self.__dict__.items() if k != "_compiled"}
 
@@ -155,6 +175,31 @@ _NUMPY_NAMESPACE = {
     "abs": np.abs, "ifpos": lambda a, b, c: np.where(np.asarray(a) > 0, b, c),
     **{name: float(value) for name, value in CONSTANTS.items()},
 }
+
+
+def _sign_changes(node, T: float, samples: int) -> list:
+    """The times in (0, T) where the tree ``node`` (of t alone) changes sign, bisected to round-off."""
+    code = compile(ast.fix_missing_locations(ast.Expression(body=_AsFloats().visit(copy.deepcopy(node)))),
+                   "<kink>", "eval")
+
+    def value(t):
+        with np.errstate(all="ignore"):
+            return eval(code, _NUMPY_NAMESPACE | {"t": t})  # noqa: S307 (a checked tree, no builtins)
+
+    t = np.linspace(0.0, T, samples)
+    v = np.broadcast_to(np.asarray(value(t), dtype=float), t.shape)
+    out = []
+    for i in np.nonzero(np.isfinite(v[:-1]) & np.isfinite(v[1:]) & (np.sign(v[:-1]) * np.sign(v[1:]) < 0))[0]:
+        lo, hi = float(t[i]), float(t[i + 1])
+        for _ in range(200):
+            mid = 0.5 * (lo + hi)
+            if mid in (lo, hi):
+                break
+            lo, hi = (mid, hi) if np.sign(value(mid)) == np.sign(value(lo)) else (lo, mid)
+        out.append(hi if abs(float(value(hi))) <= abs(float(value(lo))) else lo)
+    zeros = t[1:-1][v[1:-1] == 0.0]  # (a sample on the zero itself, where the sign changes across it)
+    out += [float(z) for z in zeros if np.sign(value(z - 1e-9 * T)) * np.sign(value(z + 1e-9 * T)) < 0]
+    return [k for k in out if 0.0 < k < T]
 
 
 def _walk(node, env, funcs, const):

@@ -370,6 +370,14 @@ class _Run:
         self.space_estimate, self.largest_norm = 0.0, 0.0
         self.follow = None  # (space_adapt = "during": refines the mesh at an estimate time, follow.Follow)
 
+    def _controller(self, scheme, sync) -> AdaptiveSteps:
+        """The error control of the run's steps: landing on the ``sync`` times and on the kinks of the scene's loads
+        (``Expression.kinks``: a ramp held from some time stopped backward Euler at k_min there)."""
+        sc, n = self.sc, self.numerics
+        kinks = sorted({k for v in sc.values.values() if isinstance(v, Expression) for k in v.kinks(sc["T"])})
+        return AdaptiveSteps(sc["T"], n.k, rtol=n.rtol, atol=n.atol, k_min=n.k_min, k_max=n.largest_step,
+                             order=scheme.order, sync=sync, admissible=scheme.admissible_step, kinks=kinks)
+
     def execute(self, grid, sync, record_times, limit):
         """Set up, step from 0 (or the archive's time) to T, and return the Dataset (None on ranks other than 0);
         a run that diverges raises with the Dataset of what it computed."""
@@ -379,8 +387,7 @@ class _Run:
             self.disc = disc = parallel.discretise(self.model, sc, n)  # (threads: the factorisations use them too)
             self.scheme = scheme = scheme_class(n.scheme)(disc)
             if n.adaptive:
-                self.steps = AdaptiveSteps(sc["T"], n.k, rtol=n.rtol, atol=n.atol, k_min=n.k_min, k_max=n.largest_step,
-                                           order=scheme.order, sync=sync, admissible=scheme.admissible_step)
+                self.steps = self._controller(scheme, sync)
                 self.checks = scheme.preflight(n.k)
             else:
                 self.steps = FixedSteps(grid)

@@ -183,7 +183,7 @@ class AdaptiveSteps:
     #: steps without.
     hold = 1.5
 
-    def __init__(self, T, k0, *, rtol, atol, k_min, k_max, order, sync=(), t0=0.0, admissible=None):
+    def __init__(self, T, k0, *, rtol, atol, k_min, k_max, order, sync=(), t0=0.0, admissible=None, kinks=()):
         self.t, self.T, self.k = float(t0), float(T), float(min(k0, k_max))
         self.tol = 1e-12 * max(1.0, T)
         # (a step below ~1e-10 T cannot be told from round-off in t: k_min = 1e-300 would divide by t - t_prev = 0)
@@ -191,7 +191,11 @@ class AdaptiveSteps:
         self.k0, self.rtol, self.atol, self.k_min, self.k_max = float(k0), rtol, atol, max(k_min, self.k_floor), k_max
         self.order = order
         self.growth = self.max_growth
-        self.sync = sorted(float(s) for s in sync if t0 + self.tol < s < T - self.tol)
+        #: The loads' kinks (``Expression.kinks``): landed on like the sync times, and the steps after each charged to
+        #: it as to a kink of the whole boundary (:meth:`per_unit_step`). A ramp held from t = 0.3 stopped backward
+        #: Euler at k_min there at every rtol: the step across it was judged per unit time, which grows as k falls.
+        self.kinks = sorted(float(s) for s in kinks if t0 + self.tol < s < T - self.tol)
+        self.sync = sorted(set(float(s) for s in sync if t0 + self.tol < s < T - self.tol) | set(self.kinks))
         self.err_prev = None
         self.accepted_steps = self.rejected_steps = 0
         self._t0 = float(t0)
@@ -344,7 +348,8 @@ class AdaptiveSteps:
             return False
         self.accepted(err)
         if self._kinked:
-            self._kinked = self._kinked[1:] + [float(crossed)]
+            on_kink = any(abs(self.t - s) <= self.tol for s in self.kinks)
+            self._kinked = self._kinked[1:] + [1.0 if on_kink else float(crossed)]
         return True
 
 
