@@ -374,9 +374,13 @@ class _Run:
         """The error control of the run's steps: landing on the ``sync`` times and on the kinks of the scene's loads
         (``Expression.kinks``: a ramp held from some time stopped backward Euler at k_min there)."""
         sc, n = self.sc, self.numerics
-        kinks = sorted({k for v in sc.values.values() if isinstance(v, Expression) for k in v.kinks(sc["T"])})
+        timed = [v for v in sc.values.values() if isinstance(v, Expression) and v.depends_on("t")]
+        kinks = sorted({k for v in timed for k in v.kinks(sc["T"])})
+        xyz = self.disc.vertex_xyz.T
+        loads = [functools.partial(lambda v, t: np.ravel(v(*xyz, t=t)), v) for v in timed]  # (at the vertices)
         return AdaptiveSteps(sc["T"], n.k, rtol=n.rtol, atol=n.atol, k_min=n.k_min, k_max=n.largest_step,
-                             order=scheme.order, sync=sync, admissible=scheme.admissible_step, kinks=kinks)
+                             order=scheme.order, sync=sync, admissible=scheme.admissible_step, kinks=kinks,
+                             loads=loads)
 
     def execute(self, grid, sync, record_times, limit):
         """Set up, step from 0 (or the archive's time) to T, and return the Dataset (None on ranks other than 0);

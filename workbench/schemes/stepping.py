@@ -183,7 +183,8 @@ class AdaptiveSteps:
     #: steps without.
     hold = 1.5
 
-    def __init__(self, T, k0, *, rtol, atol, k_min, k_max, order, sync=(), t0=0.0, admissible=None, kinks=()):
+    def __init__(self, T, k0, *, rtol, atol, k_min, k_max, order, sync=(), t0=0.0, admissible=None, kinks=(),
+                 loads=()):
         self.t, self.T, self.k = float(t0), float(T), float(min(k0, k_max))
         self.tol = 1e-12 * max(1.0, T)
         # (a step below ~1e-10 T cannot be told from round-off in t: k_min = 1e-300 would divide by t - t_prev = 0)
@@ -195,6 +196,10 @@ class AdaptiveSteps:
         #: it as to a kink of the whole boundary (:meth:`per_unit_step`). A ramp held from t = 0.3 stopped backward
         #: Euler at k_min there at every rtol: the step across it was judged per unit time, which grows as k falls.
         self.kinks = sorted(float(s) for s in kinks if t0 + self.tol < s < T - self.tol)
+        #: The loads as functions of t (arrays), with their largest size over [0, T]: a step must resolve them
+        #: (:meth:`load_error`).
+        self.loads = [(f, max(float(np.abs(f(t)).max(initial=0.0)) for t in np.linspace(0.0, T, 201)))
+                      for f in loads]
         self.sync = sorted(set(float(s) for s in sync if t0 + self.tol < s < T - self.tol) | set(self.kinks))
         self.err_prev = None
         self.accepted_steps = self.rejected_steps = 0
@@ -332,10 +337,32 @@ class AdaptiveSteps:
                                f"{'' if floor else 'lower k_min, '}or check the scene", time=self.t)
         self.k = new if theta is not None else self._quantize(new)
 
+    #: The loads' interpolation error a step may leave, in rtol (:meth:`load_error`): a bound for steps that no
+    #: estimate shortens, not the accuracy's driver (at 1, a rod driven by 0.3 sin(2 pi t) under BDF2 came out at
+    #: 0.09 rtol where its estimate alone gives 0.22).
+    load_share = 10.0
+
+    def load_error(self) -> float:
+        """How far the step's straight line between its ends misses the loads inside it, at its quarter points, over
+        rtol times each load's largest size (and atol): at most 1 where the step resolves them. A body that follows
+        a load exactly (a free rod's rigid motion) has no error estimate to shorten its steps, and an event check
+        along that line misses a contact that begins and ends inside the step: a rod moved by 0.03 sin(20 pi t) kept
+        an error of 6.5e-3 from rtol = 1e-3 to 1e-5."""
+        t0, t1 = self.t, self._proposed
+        worst = 0.0
+        for f, size in self.loads:
+            a, b = f(t0), f(t1)
+            for s in (0.25, 0.5, 0.75):
+                miss = float(np.abs(f(t0 + s * (t1 - t0)) - ((1 - s) * a + s * b)).max(initial=0.0))
+                worst = max(worst, miss / (self.atol + self.load_share * self.rtol * size) if size > 0 else 0.0)
+        return worst
+
     def judge(self, err, theta, crossed=0.0) -> bool:
         """Whether the step just taken is accepted (``err``: the scheme's scaled local error, ``theta``: where
         to land on an event, ``crossed``: see :meth:`per_unit_step`); updates the controller either way."""
         err = self.per_unit_step(err, crossed)
+        if self.loads and err is not None:
+            err = max(err, self.load_error() ** (self.order / 2.0))  # (in the scheme's order: the controller's)
         k = self._proposed - self.t
         if theta is not None and theta * k > self.k_min and (1 - theta) * k > self.k_min:
             if self._resume is None:  # the step to go on with after landing: what the error asked for
