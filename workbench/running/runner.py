@@ -376,8 +376,9 @@ class _Run:
         sc, n = self.sc, self.numerics
         timed = [v for v in sc.values.values() if isinstance(v, Expression) and v.depends_on("t")]
         kinks = sorted({k for v in timed for k in v.kinks(sc["T"])})
-        xyz = self.disc.vertex_xyz.T
-        loads = [functools.partial(lambda v, t: np.ravel(v(*xyz, t=t)), v) for v in timed]  # (at the vertices)
+        # (the loads at a grid of 5 points an axis over the body's box: the same on every process, whatever its part)
+        xyz = [g.ravel() for g in np.meshgrid(*[np.linspace(lo, hi, 5) for lo, hi in self.model.geometry.bbox])]
+        loads = [functools.partial(lambda v, t: np.ravel(v(*xyz, t=t)), v) for v in timed]
         return AdaptiveSteps(sc["T"], n.k, rtol=n.rtol, atol=n.atol, k_min=n.k_min, k_max=n.largest_step,
                              order=scheme.order, sync=sync, admissible=scheme.admissible_step, kinks=kinks,
                              loads=loads)
