@@ -46,6 +46,12 @@ class Loads:
     delta: object = None  # rod: u(0, t)
     u0: object = None  # rod, Model A: the initial displacement
 
+    def in_time(self) -> list:
+        """The loads that change with t (what drives the body; error control lands on their kinks and resolves
+        them: :class:`~workbench.schemes.stepping.AdaptiveSteps`)."""
+        loads = [*self.tractions.values(), self.body_force, self.point_force, self.delta]
+        return [e for e in loads if e is not None and e.depends_on("t")]
+
 
 class Model(Protocol):
     """What every model declares (module docs).

@@ -374,7 +374,7 @@ class _Run:
         """The error control of the run's steps: landing on the ``sync`` times and on the kinks of the scene's loads
         (``Expression.kinks``: a ramp held from some time stopped backward Euler at k_min there)."""
         sc, n = self.sc, self.numerics
-        timed = [v for v in sc.values.values() if isinstance(v, Expression) and v.depends_on("t")]
+        timed = self.model.loads.in_time()  # (not the scene's every expression in t: a memory kernel's t is a lag)
         kinks = sorted({k for v in timed for k in v.kinks(sc["T"])})
         # (the loads at a grid of 5 points an axis over the body's box: the same on every process, whatever its part)
         xyz = [g.ravel() for g in np.meshgrid(*[np.linspace(lo, hi, 5) for lo, hi in self.model.geometry.bbox])]
