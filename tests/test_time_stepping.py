@@ -314,6 +314,17 @@ def test_a_load_that_kinks_is_landed_on_and_its_tolerance_delivered(scheme, rtol
     assert free.attrs["status"] == "complete" and free.attrs["nsteps"] < 60
 
 
+def test_only_the_loads_are_landed_on_and_resolved_not_a_kernels_lag():
+    """The times error control lands on and the loads it resolves are the model's loads in t (the rod's end here),
+    not every expression in t of the scene: a memory kernel's t is a lag, and its kink at 0.5 is no time."""
+    sc = workbench.scene("memory_rod", kernel="exp(-abs(t - 0.5))", kernel_E=0.5, prony=(),
+                         delta="-0.05 + 0.2*ifpos(t - 0.3, 0.3, t)")
+    loads = sc.model_of().loads.in_time()
+    assert [str(e) for e in loads] == [str(sc["delta"])] and loads[0].kinks(1.0) == pytest.approx([0.3])
+    ds = workbench.run(sc, rtol=1e-3, progress=False)
+    assert ds.attrs["status"] == "complete" and np.min(np.abs(ds.time.values - 0.3)) < 1e-12
+
+
 def test_steps_resolve_the_loads_that_drive_a_body_without_an_error_estimate():
     """A rod moved by 0.2 t - 0.05 + 0.03 sin(20 pi t) is free most of the time, where Model B's estimate is round-off
     (its rigid motion is exact at any step): its steps grew to 0.375 s and stepped over whole contact episodes, and
