@@ -197,8 +197,7 @@ class AdaptiveSteps:
         #: Euler at k_min there at every rtol: the step across it was judged per unit time, which grows as k falls.
         self.kinks = sorted(float(s) for s in kinks if t0 + self.tol < s < T - self.tol)
         #: The loads as functions of t (arrays, the same on every process), with their largest size over [0, T]: a
-        #: step must resolve them
-        #: (:meth:`load_error`).
+        #: step must resolve them (:meth:`load_error`).
         self.loads = [(f, max(float(np.abs(f(t)).max(initial=0.0)) for t in np.linspace(0.0, T, 201)))
                       for f in loads]
         self.sync = sorted(set(float(s) for s in sync if t0 + self.tol < s < T - self.tol) | set(self.kinks))
