@@ -314,6 +314,31 @@ def test_a_load_that_kinks_is_landed_on_and_its_tolerance_delivered(scheme, rtol
     assert free.attrs["status"] == "complete" and free.attrs["nsteps"] < 60
 
 
+@pytest.mark.parametrize("scheme, rtol", [("implicit", 1e-2), ("bdf2", 1e-3)])
+def test_the_prescribed_motion_is_no_time_error(scheme, rtol):
+    """The rod's end moved by delta = 0.03 sin(20 pi t): the step meets delta at its end exactly, and a free rod moves
+    rigidly with it, which every step reproduces. The predictor missed by delta's curvature, which the estimate read
+    as error (an outside pass, December 2026): a free rod took 5068 BDF2 steps at rtol 1e-3 to T = 1 and 5801
+    backward Euler steps at 1e-2 to T = 0.3, 6503 and 5467 in contact. That miss, spread by the step's operator, is
+    left out of the estimate now (``prescribed_response``): the free rod takes the steps that follow the load
+    (``load_error``; 253 and 27 measured), and in contact and glued the error against fixed BDF2 steps of 1e-4 s is
+    within rtol in 1071 and 65 steps (0.25 and 0.40 rtol measured)."""
+    delta, T = "0.03*sin(20*pi*t)", 1.0 if scheme == "bdf2" else 0.3
+    free = workbench.run("rod", h=0.05, scheme=scheme, rtol=rtol, T=T, delta=delta, contact=False, adhesion=False,
+                         progress=False)
+    assert free.attrs["nsteps"] < (400 if scheme == "bdf2" else 60)
+    assert np.abs(free.u_probe.values[..., 0] - 0.03 * np.sin(20 * np.pi * free.time.values)[:, None]).max() < 1e-12
+    ds = workbench.run("rod", h=0.05, scheme=scheme, rtol=rtol, T=T, delta=delta, progress=False)
+    times = ds.time.values[np.concatenate([[True], np.diff(ds.time.values) > 1e-7])]  # (landing on the contact's
+    base = np.arange(0.0, T + 1e-12, 1e-4)  # kinks takes steps down to 1e-8 s: times too close to be told apart)
+    base = base[np.min(np.abs(base[:, None] - times[None, :]), axis=1) > 1e-7]
+    ref = workbench.run("rod", h=0.05, scheme="bdf2", rtol=0, T=T, times=np.union1d(base, times).tolist(),
+                        record_times=list(times), delta=delta, progress=False)
+    exact = ref.u_probe.sel(time=times, method="nearest").values
+    assert np.abs(ds.u_probe.sel(time=times).values - exact).max() <= rtol * np.abs(exact).max()
+    assert ds.attrs["nsteps"] < (2000 if scheme == "bdf2" else 200)
+
+
 def test_only_the_loads_are_landed_on_and_resolved_not_a_kernels_lag():
     """The times error control lands on and the loads it resolves are the model's loads in t (the rod's end here),
     not every expression in t of the scene: a memory kernel's t is a lag, and its kink at 0.37 is no time."""
