@@ -265,6 +265,23 @@ def test_converged_steady_state_is_not_flagged(scheme, k, T):
     assert ds.attrs["status"] == "complete"
 
 
+@pytest.mark.parametrize("steps", [dict(k=1e-4), dict(rtol=1e-4)])
+def test_a_body_that_never_moves_is_not_flagged(steps):
+    """A rod whose end is held at delta = 0.1 against the foundation (gap, F and c zero: Signorini) never moves, and
+    its pressure grows with the memory alone, p = 0.1 (1 + 0.5 * 0.2 (1 - e^(-t/0.2))). Its velocity is round-off
+    throughout (changes of 8e-16 in u), so the peak-relative noise floor was round-off too: the run was stopped as
+    "unstable at this step size" at t = 0.75 s with k = 1e-4 and at step 1488 under rtol = 1e-4 (an outside pass,
+    December 2026). Velocities below 1e-10 of the largest |u| per step are round-off now. The pressure is off by
+    2.5e-6 (k = 1e-4, the rectangle rule's O(k)) and 1.8e-5 (rtol = 1e-4 on u, which is exact here: 11024 steps)."""
+    ds = workbench.run("memory_rod", delta="0.1", gap=0, F=0, c=0, progress=False, **steps)
+    assert ds.attrs["status"] == "complete"
+    u = ds.u_probe.values
+    assert np.abs(u - u[0]).max() < 1e-12
+    t = ds.time.values
+    exact = 0.1 * (1 + 0.5 * 0.2 * (1 - np.exp(-t / 0.2)))
+    assert np.abs(ds.contact_pressure.values[:, -1] - exact).max() < 3e-4 * 0.1
+
+
 def test_unstable_explicit_run_is_stopped():
     """Explicit scheme far above k_crit (allow_unstable): the run is stopped as Diverged instead of returning
     a 'complete' result that is 50 x off the implicit one: the contact nodes bounce in and out of the

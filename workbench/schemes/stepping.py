@@ -403,7 +403,14 @@ class OscillationWatch:
         self.peak = [0.0] * len(parts)
         self.prev_norm = [0.0] * len(parts)
 
-    def flipped(self) -> bool:
+    #: Velocities below this share of the largest displacement so far per step are round-off too, whatever their
+    #: own peak: a body that never moved has a peak of round-off (a rod held at rest by Signorini contact, with
+    #: changes of 8e-16 in u, was stopped as unstable at t = 0.75 s by the peak-relative test alone).
+    round_off = 1e-10
+
+    def flipped(self, floor: float = 0.0) -> bool:
+        """Whether a velocity has alternated for ``window`` steps without decaying; ``floor``: the velocity below which
+        it is round-off (:attr:`round_off` x the largest |u| so far / k, from :class:`_Guard`)."""
         hit = False
         for i, part in enumerate(self.parts):
             cur = self.v if part is None else self.v[part]
@@ -415,7 +422,7 @@ class OscillationWatch:
                 along = self.world.sum(cur[mine] @ self.prev[i][mine]) if self.have[i] else 0.0
             self.peak[i] = max(self.peak[i], nv)
             # velocities at round-off level (a run at rest) carry no sign information
-            significant = nv > self.noise * self.peak[i]
+            significant = nv > max(self.noise * self.peak[i], floor)
             alternating = self.have[i] and significant and along < -0.5 * nv * self.prev_norm[i]
             self.count[i] = self.count[i] + 1 if alternating else 0
             self.norms[i].append(nv)  # (a deque of the last window + 1 norms)
@@ -584,6 +591,7 @@ class _Guard:
         self.limit = limit
         self.bound = limit or math.inf
         self.u = u = disc.u.vec.FV().NumPy()
+        self.largest = 0.0  # (the largest |u| so far: the scale of a velocity's round-off)
         self.world = disc.world
         self.watch = OscillationWatch(disc.v.vec.FV().NumPy(), [None] + ([disc.normal_dofs] if disc.dim > 1 else []),
                                       world=self.world, owned=disc.owned())
@@ -592,7 +600,8 @@ class _Guard:
 
     def check(self, n: int, t_prev: float, t: float) -> None:
         norm = self.world.max(np.abs(self.u).max(initial=0.0))
-        oscillating = self.watch.flipped()
+        self.largest = max(self.largest, norm) if math.isfinite(norm) else self.largest
+        oscillating = self.watch.flipped(self.watch.round_off * self.largest / (t - t_prev))
         chattering = self.chatter is not None and self.chatter.chattering()
         if math.isfinite(norm) and norm <= self.bound and not oscillating and not chattering:
             return
