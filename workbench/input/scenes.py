@@ -499,15 +499,18 @@ def _check_consistency(name, body, v, model="A"):
 
 def _check_expressions(body, v):
     """Every expression is finite on the body at a few times in [0, T] (a division by zero fails here, not later)."""
-    from ..expressions import Expression
+    from ..expressions import VARIABLES, Expression
 
     coordinates = set("xyz"[: body.dim])
     for key, expr in v.items():
         if isinstance(expr, Expression):
-            extra = sorted(expr.variables - coordinates - {"t"})
+            # (the parameter's own variables: u0 is a field in space alone, which its parse checked)
+            declared = set(PARAMETERS[key].variables) if key in PARAMETERS else set(VARIABLES)
+            allowed = sorted(coordinates & declared) + (["t"] if "t" in declared else [])
+            extra = sorted(expr.variables - set(allowed))
             if extra:
                 raise ParameterError(f"in {key} = {_clip(expr.source)}: {extra[0]!r} is not a coordinate of a "
-                                     f"{body.kind} (allowed: {', '.join(sorted(coordinates) + ['t'])})")
+                                     f"{body.kind} (allowed: {', '.join(allowed)})")
     corners = np.array(np.meshgrid(*[[lo, 0.5 * (lo + hi), hi] for lo, hi in body.bbox], indexing="ij")
                        ).reshape(body.dim, -1)
     found = not_finite(v, np.linspace(0.0, v["T"], 11), corners)
