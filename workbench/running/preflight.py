@@ -165,13 +165,21 @@ def warnings_for(scene, model, used: dict | None = None) -> list:
 def _ignored_by_the_solver(scene, used: dict) -> list:
     """A value the user gave that the contact solver ``auto`` took does not read: ``contact_tol`` where it took the
     condensed solver, which solves each active set exactly (``contact_solver = 'condensed'`` with it is refused
-    before the run; ``auto`` decides by the contact points, known once the mesh is made). ``used``: the scheme's
-    :meth:`preflight` record."""
-    if "contact_tol" not in scene.set_by_user or used.get("contact_solver_used") != "condensed":
+    before the run; ``auto`` decides by the contact points, known once the mesh is made), or reads only if the zone
+    outgrows the candidate points it solves on first, exactly too. ``used``: the scheme's :meth:`preflight`
+    record."""
+    if "contact_tol" not in scene.set_by_user:
         return []
-    return [f"{scene.name}: contact_tol = {scene['contact_tol']:g} has no effect: contact_solver = "
-            f"{scene['contact_solver']!r} took the condensed solver here, which solves each active set exactly "
-            "(contact_solver = 'coupled' takes the tolerance)"]
+    if used.get("contact_solver_used") == "condensed":
+        return [f"{scene.name}: contact_tol = {scene['contact_tol']:g} has no effect: contact_solver = "
+                f"{scene['contact_solver']!r} took the condensed solver here, which solves each active set exactly "
+                "(contact_solver = 'coupled' takes the tolerance)"]
+    if used.get("contact_candidates_planned"):  # (the coupled solver acts only if the zone outgrows them)
+        return [f"{scene.name}: contact_tol = {scene['contact_tol']:g} acts only if the contact zone outgrows the "
+                f"{used['contact_candidates_planned']} candidate points of smallest gap, on which contact_solver = "
+                f"{scene['contact_solver']!r} solves each active set exactly first (contact_solver = 'coupled' "
+                "takes the tolerance throughout)"]
+    return []
 
 
 #: Parameters that act only with another: (the parameters, whether that other acts, what it is).

@@ -132,6 +132,11 @@ class Candidates:
         return dense_points(ndof, method, float(np.clip(steps / cls.steps_per_backsub, least, largest)))
 
     @staticmethod
+    def planned(count: int) -> dict:
+        """The preflight record: how many candidates (points, or dofs on facets) the steps try first, where any."""
+        return {"contact_candidates_planned": int(count)} if count else {}
+
+    @staticmethod
     def attrs(candidates) -> dict:
         """The run's attributes: how many candidates its steps solved on (0: none), and whether the contact zone
         outgrew them (1: the coupled solver took over)."""

@@ -104,6 +104,7 @@ class ImplicitEuler(ErrorControlled, KelvinVoigtScheme):
 
     def preflight(self, k_max: float) -> dict:
         used = {"contact_solver_used": "coupled" if self.coupled else "condensed"} if self.d.side is not None else {}
+        used |= Candidates.planned(len(self.candidates.C) if self.candidates else 0)
         return self.bonding_check(k_max) | used
 
     def used(self) -> dict:

@@ -151,7 +151,7 @@ class MemoryVI(ErrorControlled, Scheme):
         """Records how a general kernel was approximated by exponentials (its terms and error bound)."""
         fit = self.d.model.memory.fit if self.d.model.memory is not None else None
         used = {"contact_solver_used": "coupled" if self.coupled is not None else "condensed",
-                "linear_solver": self.solver.name}
+                "linear_solver": self.solver.name} | Candidates.planned(len(self.candidates.P) if self.candidates else 0)
         return used if fit is None else used | {"kernel_terms": fit["terms"], "kernel_fit_error": fit["error"]}
 
     # -- the operator of a step -------------------------------------------------------------------------------
