@@ -339,7 +339,7 @@ class AdaptiveSteps:
 
     #: The loads' interpolation error a step may leave, in rtol (:meth:`load_error`): a bound for steps that no
     #: estimate shortens, not the accuracy's driver (at 1, a rod driven by 0.3 sin(2 pi t) under BDF2 came out at
-    #: 0.09 rtol where its estimate alone gives 0.22).
+    #: 0.28 rtol in 195 steps at rtol 1e-3, where the estimate gives 0.82 in 166).
     load_share = 10.0
 
     def load_error(self) -> float:
