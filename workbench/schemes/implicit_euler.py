@@ -239,7 +239,7 @@ class ImplicitEuler(ErrorControlled, KelvinVoigtScheme):
             f_C = x.run(lambda: self.newton.solve(u_C, z_C, t_next, d.scene.name), self.solver)
             if beta is None:
                 break
-            x.put(u, self._on_view(C, u_C))  # the bonding update reads u on the contact side only
+            x.put(u, on_view(self.exchange, C, u_C))  # the bonding update reads u on the contact side only
             previous = beta[d.beta_dofs].copy()
             self._update_beta(k, beta_old)
             if d.world.max(np.abs(beta[d.beta_dofs] - previous).max(initial=0.0)) <= self.beta_tol:
@@ -249,25 +249,11 @@ class ImplicitEuler(ErrorControlled, KelvinVoigtScheme):
         if self.split is not None:
             return self.split.expand(u_C - self.u_prev[C], self.z)  # du from its values at the contact dofs
         out = np.zeros(d.ndof)
-        self.solver.solve(x.spread(self._on_view(C, f_C)), out)
+        self.solver.solve(x.spread(on_view(self.exchange, C, f_C)), out)
         self.z -= out
 
     def prescribed_response(self, u_pred: np.ndarray):
-        """The rod end's predictor miss d = u - u_pred there, spread by the step's operator M: d at the end, and
-        -M_II^-1 M_ID d inside (one back-substitution). A free rod moved by delta(t) moves rigidly, u = delta, which
-        every step meets exactly; its predictor misses by delta's curvature, which read as error took backward Euler
-        149135 steps at rtol 1e-3 for delta = -0.1 + 0.03 sin(20 pi t)."""
-        d = self.d
-        if not d.moves_clamp or self.M is None:
-            return None
-        D, lift = d.dirichlet_dofs, self.lift.FV().NumPy()
-        lift[:] = 0.0
-        lift[D] = d.u.vec.FV().NumPy()[D] - u_pred[D]
-        self.work.data = self.M * self.lift
-        out = np.zeros(d.ndof)
-        self.solver.solve(-self.work.FV().NumPy(), out)
-        out[D] = lift[D]
-        return out
+        return end_response(self.d, self.M, self.solver, u_pred) if self.d.moves_clamp and self.M is not None else None
 
     def _on_candidates(self, u: np.ndarray, k: float, t_next: float) -> bool:
         """``self.z`` solved on the contact candidates (.facet_candidates); False where none, or they missed."""
@@ -279,14 +265,6 @@ class ImplicitEuler(ErrorControlled, KelvinVoigtScheme):
             self.z[:] = du
             self.iterations, self.inner, self.passes = self.kept[1].iterations, self.kept[1].linear_iterations, 1
         return du is not None
-
-    def _on_view(self, C, values):
-        """A dof vector of the view with ``values`` on the contact dofs ``C`` (None where the solver does not run)."""
-        if values is None:
-            return None
-        out = np.zeros(self.exchange.view.ndof)
-        out[C] = values
-        return out
 
     # -- the bonding field --------------------------------------------------------------------------------------
     def _r2(self, u):
@@ -329,3 +307,30 @@ def extrapolated(x, u: np.ndarray, history, C, k: float):
     if before is not None:
         u_C += (k / (history[-1][0] - history[-2][0])) * (u_C - before[C])
     return u_C
+
+
+def on_view(x, C, values):
+    """A dof vector of the view of the exchange ``x`` with ``values`` on the contact dofs ``C`` (None where the solver
+    does not run)."""
+    if values is None:
+        return None
+    out = np.zeros(x.view.ndof)
+    out[C] = values
+    return out
+
+
+def end_response(d, M, solver, u_pred: np.ndarray) -> np.ndarray:
+    """The rod end's predictor miss m = u - ``u_pred`` there, spread by the step's operator ``M`` (factored by
+    ``solver``): m at the end, -M_II^-1 M_ID m inside (one back-substitution, :meth:`ImplicitEuler.prescribed_response`).
+    A free rod moved by delta(t) moves rigidly, u = delta, which every step meets exactly; its predictor misses by
+    delta's curvature, which read as error took backward Euler 149135 steps at rtol 1e-3 for
+    delta = -0.1 + 0.03 sin(20 pi t)."""
+    D, lift, work = d.dirichlet_dofs, d.u.vec.CreateVector(), d.u.vec.CreateVector()
+    miss = lift.FV().NumPy()
+    miss[:] = 0.0
+    miss[D] = d.u.vec.FV().NumPy()[D] - u_pred[D]
+    work.data = M * lift
+    out = np.zeros(d.ndof)
+    solver.solve(-work.FV().NumPy(), out)
+    out[D] = miss[D]
+    return out
