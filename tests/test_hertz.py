@@ -454,3 +454,18 @@ def test_a_hertz_body_whose_held_apex_would_carry_force_is_warned_about(scene, v
     with warnings.catch_warnings():
         warnings.simplefilter("error", RuntimeWarning)
         workbench.run(scene, h=0.2, h_contact=0.02, T=0.5, k=0.25, progress=False)
+
+
+def test_tau_scales_the_elastic_tensor_given():
+    """``tau`` makes the viscous tensor tau G. Given G as ``elastic_tensor``, a1 and a2 were made from the default E
+    and nu instead: for the plane-strain tensor of E = 2000, A was half of tau G, and u 18 % off at t = 0.1 (an
+    outside pass, December 2026). Now the viscous tensor is tau times the tensor given, and the run equals the one
+    with E = 2000 to round-off."""
+    lam, mu = 2000 * 0.3 / (1.3 * 0.4), 2000 / 2.6
+    C = [[lam + 2 * mu, lam, 0.0], [lam, lam + 2 * mu, 0.0], [0.0, 0.0, mu]]
+    kw = dict(h=0.2, h_contact=0.02, T=0.2, k=0.05, progress=False)
+    a = workbench.run("hertz", elastic_tensor=C, **kw)
+    b = workbench.run("hertz", E=2000.0, **kw)
+    A = workbench.scene("hertz", elastic_tensor=C)["viscous_tensor"]
+    np.testing.assert_allclose(np.array(A, dtype=float), 0.05 * np.array(C), rtol=1e-12)
+    assert np.abs(a.u_probe.values - b.u_probe.values).max() <= 1e-10 * np.abs(b.u_probe.values).max()

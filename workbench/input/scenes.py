@@ -140,8 +140,12 @@ _MEMORY_2D = dict(width=2.0, height=1.0, h=0.05, k=0.02, T=1.0, E=1000.0, nu=0.3
 
 def _kelvin_voigt_of_tau(v):
     """A = tau G: the viscosity a1 = tau lambda, a2 = 2 tau mu of E, nu (plane strain and 3D: the 3D Lame constants;
-    plane stress: lambda* = 2 lambda mu / (lambda + 2 mu))."""
+    plane stress: lambda* = 2 lambda mu / (lambda + 2 mu)); where G is given as ``elastic_tensor``, the viscous
+    tensor tau G itself (a1, a2 of the default E, nu made A half of tau G's for E = 2000; an outside pass, December
+    2026)."""
     E, nu, tau = v["E"], v["nu"], v["tau"]
+    if v.get("elastic_tensor"):
+        return {"viscous_tensor": tuple(tuple(tau * float(c) for c in row) for row in v["elastic_tensor"])}
     lam, mu = E * nu / ((1 + nu) * (1 - 2 * nu)), E / (2 * (1 + nu))
     if v.get("plane") == "stress":
         lam = 2 * lam * mu / (lam + 2 * mu)
@@ -149,7 +153,8 @@ def _kelvin_voigt_of_tau(v):
 
 
 _TAU = {"tau": Param("tau", 0.05, "s", "Kelvin-Voigt relaxation time: the viscous tensor is tau times the elastic one "
-                     "(sets a1, a2 unless they are given)", lower=0.0, lower_open=True)}
+                     "(sets a1, a2 unless they are given, or viscous_tensor where elastic_tensor is given)",
+                     lower=0.0, lower_open=True)}
 _MESH_A = dict(k=0.01, T=1.0, scheme="implicit", adhesion=False, c_nu=1e4, snapshots=(0.5, 1.0))
 _MESH_B = dict(k=0.25, T=1.0, scheme="vi", gap=0.0, F=0.0, c=0.0, snapshots=(0.5, 1.0))
 _HERTZ_A = dict(radius=1.0, h=0.1, E=1000.0, nu=0.3, plane="strain", contact=True, adhesion=False, c_nu=1e5,
@@ -319,9 +324,11 @@ def make(name: str, overrides: dict | None = None, *, base: str | None = None, d
     raw = {n: p.default for n, p in known.items()} | preset.values | overrides
     derived, inputs = {}, []
     if preset.derive is not None:
-        inputs = [n for n in known if n in preset.extras or n in ("E", "nu", "plane")]
+        inputs = [n for n in known if n in preset.extras or n in ("E", "nu", "plane", "elastic_tensor")]
         checked_extras = {n: known[n].check(raw[n]) for n in inputs}
-        derived = {k: v for k, v in preset.derive(checked_extras).items() if k not in overrides}
+        # (a viscosity given as a1 or a2 stands: no viscous tensor is derived over it)
+        given = set(overrides) | ({"viscous_tensor"} if {"a1", "a2"} & set(overrides) else set())
+        derived = {k: v for k, v in preset.derive(checked_extras).items() if k not in given}
         raw |= derived
     geometry = GEOMETRIES[preset.geometry]
     if "mesh" in known:
