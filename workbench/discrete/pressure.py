@@ -27,6 +27,10 @@ import scipy.sparse as sp
 from ngsolve import VERTEX, NodeId
 
 
+#: Lumped pressures at or below this share of the largest one are round-off: not in contact for the recovery.
+ROUND_OFF = 1e-9
+
+
 class Recovery:
     """The recovered contact pressure on the contact vertices ``vertex_numbers`` of the side ``contact_name`` (module
     docs); call it with the lumped pressures and the vertices' weights. ``normal_axis``: the coordinate along the
@@ -54,7 +58,11 @@ class Recovery:
         (all in contact), else sum_j F_j / sum_j w_j over its patch's vertices in contact (F_j = p_j w_j); scaled to
         the same resultant. Vertices not in contact keep their value, NaN (clamped) stays."""
         known = np.isfinite(pressure)
-        pressing = known & (pressure > 0)  # (no pressure leaks out of the contact zone, its edge is not smeared)
+        # (no pressure leaks out of the contact zone, its edge is not smeared; a vertex pressed by round-off is not in
+        # it: as in contact it took its patch's average, and a lumped 2e-12 Pa became 73 Pa, where 0 on another
+        # number of MPI processes stayed 0 (an outside pass, December 2026))
+        floor = ROUND_OFF * np.abs(pressure[known]).max(initial=0.0)
+        pressing = known & (pressure > floor)
         F = np.where(pressing, pressure, 0.0) * weights
         w = np.where(pressing, weights, 0.0)
         out = np.where(known, pressure, np.nan)
