@@ -407,3 +407,44 @@ def test_the_explicit_scheme_converges_to_the_semi_discrete_solution_on_any_numb
         errors = [np.abs(u - exact).max() / np.abs(exact).max() for u in runs]
         order = np.log(errors[0] / errors[1]) / np.log(2.0)
         assert 0.9 <= order <= 1.1 and errors[1] < 0.08, (errors, order)
+
+
+_SIGNALLED_ON_RANK_1 = """
+import os, sys
+from workbench.cli import console
+from workbench.schemes import stepping
+
+advance, SIGNAL = stepping._advance, int(sys.argv.pop(1))
+rank = int(os.environ.get("PMI_RANK", os.environ.get("OMPI_COMM_WORLD_RANK", "0")))
+
+def advance_then_signal(scheme, steps, t_prev, t):
+    if rank == 1 and t_prev >= 0.1 and not getattr(advance_then_signal, "sent", False):
+        advance_then_signal.sent = True
+        os.kill(os.getpid(), SIGNAL)
+    return advance(scheme, steps, t_prev, t)
+
+stepping._advance = advance_then_signal
+sys.exit(console())
+"""
+
+
+@pytest.mark.mpi
+@pytest.mark.slow
+@pytest.mark.parametrize("signum, code", [(2, 130), (15, 143)], ids=["SIGINT", "SIGTERM"])
+def test_a_distributed_run_stopped_by_a_signal_writes_the_steps_it_took(tmp_path, signum, code):
+    """Ctrl-C or SIGTERM under ``mpiexec -n 2``: each rank raised where it happened to be, so there was nothing to
+    gather; nothing was written, every rank said "interrupted", and on two processes the run hung (an outside pass,
+    December 2026). Now a signal asks every rank to stop after the current step, together: the steps recorded are
+    written as a diverged run's are, with one error line and 128 + the signal's number, here with the signal sent to
+    rank 1 alone at t = 0.1."""
+    script = tmp_path / "signalled.py"
+    script.write_text(_SIGNALLED_ON_RANK_1)
+    p = subprocess.run([_mpiexec(), "-n", "2", sys.executable, str(script), str(signum), "run", "block", "--h", "0.2",
+                        "--k", "0.01", "--T", "1", "--set", "scheme=implicit", "--no-progress", "-o", "a.nc"],
+                       cwd=tmp_path, capture_output=True, text=True, env=alone(), timeout=300)
+    assert p.returncode == code and "Traceback" not in p.stderr, p.stderr
+    assert p.stderr.count("error:") == 1, p.stderr
+    ds = workbench.load(tmp_path / "a.nc")
+    assert ds.attrs["status"] == "incomplete" and ds.attrs["failure_type"] == "Interrupted"
+    t = float(ds.time[-1])
+    assert 0.1 < t < 0.3 and f"its steps to t = {t:g} s are kept" in ds.attrs["failure"]

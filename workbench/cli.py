@@ -287,6 +287,8 @@ def cmd_run(args) -> int:
         print(_one_line(f"error: {err}"), file=sys.stderr)
         ds, code = err.dataset, EXIT_DIVERGED
     except Interrupted as err:  # (Ctrl-C, SIGTERM: the steps before are written as a diverged run's are)
+        if err.dataset is None and _other_rank():  # (several MPI processes: rank 0 has the result and says it)
+            return 128 + err.signal
         if err.dataset is None:
             raise
         print(_one_line(f"error: {err}"), file=sys.stderr)
@@ -644,16 +646,20 @@ def _other_rank() -> bool:
 
 def _terminate_as_interrupt() -> None:
     """SIGTERM (a batch scheduler's time limit, ``kill``) stops the command as Ctrl-C does, so a run keeps the steps
-    it recorded (exit 143); one process only: MPI's ranks are ended by their launcher."""
+    it recorded (exit 143). On several MPI processes both signals ask every rank to stop after the current step,
+    together (:func:`workbench.discrete.world.request_stop`), instead of raising where each rank happens to be."""
     import signal
 
-    from .discrete.world import launched
+    from .discrete.world import launched, request_stop
 
     def interrupt(signum, frame):
         raise Interrupted("terminated (SIGTERM)", signal=signum)
 
     if launched() <= 1:
         signal.signal(signal.SIGTERM, interrupt)
+    else:
+        for signum in (signal.SIGINT, signal.SIGTERM):
+            signal.signal(signum, lambda signum, frame: request_stop(signum))
 
 
 def console() -> int:

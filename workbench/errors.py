@@ -54,11 +54,12 @@ class StepLimitExceeded(Diverged):
 class Interrupted(KeyboardInterrupt):
     """A run stopped from outside: Ctrl-C (SIGINT), or SIGTERM on the command line (a batch scheduler's time limit).
     ``dataset`` holds the steps recorded before, marked incomplete (no state to go on from: the step under way may
-    have been left half done; ``checkpoint_every`` keeps one); ``signal`` is the signal's number."""
+    have been left half done; ``checkpoint_every`` keeps one); ``signal`` is the signal's number; ``together``: raised
+    on every process of a distributed run after the same step (:func:`workbench.discrete.world.request_stop`)."""
 
-    def __init__(self, message="interrupted", dataset=None, signal: int = 2):
+    def __init__(self, message="interrupted", dataset=None, signal: int = 2, together: bool = False):
         super().__init__(message)
-        self.dataset, self.signal = dataset, signal
+        self.dataset, self.signal, self.together = dataset, signal, together
 
 
 class NotWritten(OSError):

@@ -65,3 +65,22 @@ def alone(environment=None) -> dict:
     from it runs alone (a study's worker), or under a launcher of its own."""
     environment = os.environ if environment is None else environment
     return {key: value for key, value in environment.items() if not key.startswith(("PMI_", "OMPI_", "MV2_", "PMIX_"))}
+
+
+#: The signal (SIGINT, SIGTERM) that asked the processes of a distributed run to stop, 0 for none
+#: (:func:`request_stop`).
+_STOP = [0]
+
+
+def request_stop(signum: int) -> None:
+    """Ask a run on several MPI processes to stop after its current step (the command line's signal handler there):
+    every rank reads the request together at the end of each step (:func:`stop_requested`), so all stop after the
+    same step and the steps recorded are gathered and written, as a diverged run's are. A signal that raised at once
+    left the ranks in different places, with nothing to gather: an interrupted run wrote nothing, and on two
+    processes hung (an outside pass, December 2026)."""
+    _STOP[0] = int(signum)
+
+
+def stop_requested() -> int:
+    """The signal a stop was asked for with (:func:`request_stop`), 0 for none."""
+    return _STOP[0]

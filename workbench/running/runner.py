@@ -424,8 +424,8 @@ class _Run:
             except Diverged as err:
                 failure = _blamed(err, sc, disc)
             except KeyboardInterrupt as err:  # (Ctrl-C; SIGTERM on the command line: the steps before are kept)
-                if self.world.parallel:  # (the ranks may be stopped in different places: nothing to gather)
-                    raise
+                if self.world.parallel and not (isinstance(err, Interrupted) and err.together):  # (a raw interrupt:
+                    raise  # the ranks stopped in different places, nothing to gather; a signal's: stepping)
                 failure = err if isinstance(err, Interrupted) else Interrupted()
                 failure.args = (f"{sc.name}: {failure.args[0] if failure.args else 'interrupted'}; its steps to t = "
                                 f"{self.steps.t:.6g} s are kept",)

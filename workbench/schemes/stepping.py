@@ -14,12 +14,13 @@ from __future__ import annotations
 
 import collections
 import math
+import signal
 import sys
 
 import numpy as np
 
-from ..discrete.world import SERIAL
-from ..errors import Diverged
+from ..discrete.world import SERIAL, stop_requested
+from ..errors import Diverged, Interrupted
 
 
 def time_grid(T: float, k: float, times=None, sync=()) -> np.ndarray:
@@ -513,6 +514,7 @@ def march(disc, scheme, steps, observe, *, progress=None, limit=None, limit_orig
             if after_step is not None:
                 after_step(t, n)
             bar.update()
+            guard.stop_if_asked()
     finally:
         bar.close()
 
@@ -597,6 +599,15 @@ class _Guard:
                                       world=self.world, owned=disc.owned())
         self.chatter = ChatterWatch(lambda: disc.normal_displacement(u), world=self.world) \
             if scheme.chatter_watch else None
+
+    def stop_if_asked(self) -> None:
+        """On several processes, a signal asks every rank to stop after the step just recorded, together
+        (:func:`workbench.discrete.world.request_stop`): Interrupted on all of them."""
+        if self.world.parallel:
+            signum = int(self.world.max(stop_requested()))
+            if signum:
+                raise Interrupted("interrupted" if signum == signal.SIGINT else "terminated (SIGTERM)", signal=signum,
+                                  together=True)
 
     def check(self, n: int, t_prev: float, t: float) -> None:
         norm = self.world.max(np.abs(self.u).max(initial=0.0))
