@@ -6,6 +6,7 @@ where the serial run factors K_A: the archives must agree to that tolerance (a f
 same layout; the step limit, estimated by a Lanczos over the ranks, must agree with the serial ARPACK estimate. The
 independent references are the serial runs of the same scenes, made in this process.
 """
+import re
 import shutil
 import subprocess
 import sys
@@ -448,3 +449,21 @@ def test_a_distributed_run_stopped_by_a_signal_writes_the_steps_it_took(tmp_path
     assert ds.attrs["status"] == "incomplete" and ds.attrs["failure_type"] == "Interrupted"
     t = float(ds.time[-1])
     assert 0.1 < t < 0.3 and f"its steps to t = {t:g} s are kept" in ds.attrs["failure"]
+
+
+@pytest.mark.mpi
+@pytest.mark.slow
+def test_a_step_far_above_the_limit_is_refused_as_such_on_several_processes(tmp_path):
+    """The P2 block at h = 0.2 with k = 0.2 (about 4 k_crit): on one process a StepTooLarge with k_crit = 0.0519 s; on
+    two, the state one trial step reaches made LOBPCG's mu settle so slowly that it was refused as "cannot be
+    estimated", and allow_unstable could not run it (an outside pass, December 2026). Now the same refusal, with the
+    same k_crit to 1e-2, and allow_unstable runs until the blow-up is caught, as on one process."""
+    values = dict(h=0.2, k=0.2, T=1.0)
+    code, _, stderr = _run_distributed(2, "block", values, tmp_path / "a.nc")
+    assert code == 2 and "exceeds the predicted stability limit" in stderr, stderr
+    with pytest.raises(workbench.ParameterError, match="exceeds the predicted stability limit") as serial:
+        workbench.run("block", progress=False, **values)
+    k_crit = [float(re.search(r"k_crit = ([0-9.e-]+) s", text).group(1)) for text in (stderr, str(serial.value))]
+    assert k_crit[0] == pytest.approx(k_crit[1], rel=1e-2), k_crit
+    code, _, stderr = _run_distributed(2, "block", dict(values, allow_unstable=True), tmp_path / "b.nc")
+    assert code == 3 and workbench.load(tmp_path / "b.nc").attrs["status"] == "incomplete", stderr
