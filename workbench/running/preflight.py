@@ -262,7 +262,11 @@ def _held_apex(scene, g) -> list:
     import numpy as np
 
     why = [f"{name} = {scene[name]:g}" for name in ("gap", "F", "c") if scene.values.get(name, 0.0) > 0]
-    least = min(float(scene["load"](t=t)) for t in np.linspace(0.0, scene["T"], 201))
+    # (the load on a fine grid and beside its kinks: a pull of 1.2 ms between two ifpos switches fell between 201
+    # samples, and the apex held it)
+    load, T = scene["load"], scene["T"]
+    times = np.concatenate([np.linspace(0.0, T, 2001)] + [[s - 1e-9 * T, s + 1e-9 * T] for s in load.kinks(T)])
+    least = min(float(load(t=t)) for t in times)
     why += [f"load = {scene['load']} pulls (down to {least:g} N)"] if least < 0 else []
     if not why:
         return []
