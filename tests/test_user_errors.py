@@ -1017,6 +1017,15 @@ def test_a_presets_own_value_that_only_makes_values_given_too_is_warned_about(sc
     assert ds.attrs["status"] == "complete"
 
 
+def test_tau_with_a_viscosity_and_an_elastic_tensor_given_is_warned_about():
+    """With ``elastic_tensor`` given, ``tau`` makes the viscous tensor tau G; with a1 and a2 given too, theirs stands
+    and tau has no effect, which no warning said (it named only the viscous tensor)."""
+    C = [[2692.3, 1153.8, 0.0], [1153.8, 2692.3, 0.0], [0.0, 0.0, 769.2]]
+    with pytest.warns(RuntimeWarning, match=re.escape("tau = 0.2 has no effect with a1, a2 given (it only makes the "
+                                                      "preset's viscous_tensor)")):
+        workbench.run("hertz", h=0.5, T=0.02, tau=0.2, elastic_tensor=C, a1=1.0, a2=2.0, progress=False)
+
+
 @pytest.mark.parametrize("scene, values", [
     ("hertz", dict(h=0.25, T=0.04, probes=((0.0, 0.5), (0.9, 0.1)))),  # (a half-disc: its box's corner)
     ("hertz3d", dict(h=0.5, T=0.04, probes=((0.9, 0.9, 0.1),))),
