@@ -379,3 +379,28 @@ def test_a_run_to_any_later_T_continues_bitwise(tmp_path, scene, values, T1, T2)
     np.testing.assert_array_equal(continued.u_contact.values, straight.u_contact.values)
     np.testing.assert_array_equal(continued.snapshot_time.values, straight.snapshot_time.values)
     np.testing.assert_array_equal(continued.u_dofs.values, straight.u_dofs.values)
+
+
+def test_an_archive_that_does_not_say_what_its_user_gave_warns_of_nothing_they_did_not_give(tmp_path):
+    """Archives written before ``set_by_user_json`` took every archived value as given on continuation, so each
+    continued run warned about atol, k_min and k_max "without rtol", and space_adapt and the rest "without space_tol",
+    values their user never set (found on data/reproduction's old archives). What the user gave is now read off the
+    values: those the scene would not make by itself from the others (here h, k and T given; not the defaults, nor a
+    Hertz scene's viscosity derived from its tau, nor snapshot times derived from T)."""
+    from workbench.input import scenes
+    from workbench.running.restart import archived_scene
+
+    ds = workbench.run("tp1", h=0.1, k=0.02, T=0.2, progress=False)
+    del ds.attrs["set_by_user_json"]
+    old = workbench.write(ds, tmp_path / "old.nc")
+    with warnings.catch_warnings():
+        warnings.simplefilter("error")  # (any warning fails the continuation)
+        went_on = workbench.run(restart=old, T=0.4, progress=False)
+    straight = workbench.run("tp1", h=0.1, k=0.02, T=0.4, progress=False)
+    assert_same_run(went_on, straight)
+    hertz = scenes.make("hertz3d", {"tau": 0.3, "load": "2*t"})
+    archived = ds.copy()
+    archived.attrs.update(scene="hertz3d", base_scene="hertz3d", parameters_json=json.dumps(hertz.plain()))
+    assert archived_scene(archived).set_by_user == {"tau", "load"}
+    assert archived_scene(archived).plain() == hertz.plain()
+    assert archived_scene(archived, whole=True).set_by_user >= {"atol", "k_min", "tau", "a1"}

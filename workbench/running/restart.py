@@ -279,7 +279,33 @@ def archived_scene(ds: xr.Dataset, *, whole: bool = False, **overrides):
     values = json.loads(a["parameters_json"])
     if not whole and "set_by_user_json" in a:
         values = {name: values[name] for name in json.loads(a["set_by_user_json"]) if name in values}
+    elif not whole:
+        values = _given(a, values)
     return scenes.make(a["scene"], values | overrides, base=a["base_scene"], description=a.get("description", ""))
+
+
+def _given(a, values: dict) -> dict:
+    """What the user of an archive that does not say (written before ``set_by_user_json``) gave, as far as its
+    values tell: those its scene would not have made by itself from the others (a default, a value derived from
+    another, snapshot times from T). Taken as given, every value said that options left at their defaults acted
+    (atol without rtol, say) on each continuation."""
+    def made(given: dict) -> dict:
+        return scenes.make(a["scene"], given, base=a["base_scene"]).plain()
+
+    try:
+        own = made({})
+    except ParameterError:
+        return values
+    given = {n: v for n, v in values.items() if json.dumps(v, sort_keys=True) != json.dumps(own.get(n), sort_keys=True)}
+    for name in list(given):  # (each left out in turn: kept where the others do not make it)
+        rest = {n: v for n, v in given.items() if n != name}
+        try:
+            again = made(rest).get(name)
+        except ParameterError:
+            continue
+        if json.dumps(again, sort_keys=True) == json.dumps(given[name], sort_keys=True):
+            given = rest
+    return given
 
 
 def _text(value) -> str:
