@@ -355,7 +355,8 @@ def _reference(text):
     out = {}
     for part in text.split(","):
         if "=" not in part:
-            raise ParameterError(f"--reference {text!r}: give finest, ode, exact or e.g. h=0.003,k=0.0005")
+            raise ParameterError(f"--reference {text!r}: give auto, extrapolated, finest, ode, exact or a finer "
+                                 "run, e.g. h=0.003,k=0.0005")
         key, value = (s.strip() for s in part.split("=", 1))
         param = PARAMETERS.get(key)
         if param is None:

@@ -222,6 +222,13 @@ def convergence(study_ds, path=None, norms=("error", "error_V", "error_Q", "erro
         return tolerance(study_ds, path)
     along, x, series, finest = _series(study_ds)
     norms = [n for n in norms if n in study_ds and np.isfinite(study_ds[n].values).any()]
+    if not norms:  # (a reference that gave no error: said in the figure, which is still written, not a traceback)
+        fig, ax = figure(1, 1)
+        ax.set_axis_off()
+        ax.text(0.5, 0.5, f"no errors to draw: the reference ({plain(study_ds.attrs.get('reference'))}) gave none\n"
+                "(see the study's warnings; give a finer run as the reference)", ha="center", va="center",
+                wrap=True, fontsize=8)
+        return _save(fig, path)
     fig, axes = figure(1, len(norms), figsize=(3.8 * len(norms), 3.6), squeeze=False)
     for ax, norm in zip(axes[0], norms):
         err_all = study_ds[norm] if finest is None else study_ds[norm].isel(finest)

@@ -205,7 +205,9 @@ def read_case(path: Path, expected: dict):
     try:
         ds = results.load(path)
     except Exception as err:  # empty, truncated, not netCDF: any failure to read means recompute
-        return None, f"unreadable ({type(err).__name__}: {str(err).splitlines()[0][:80] if str(err) else 'no detail'})"
+        # (the path is said beside the reason: here its name alone, so that the cut keeps the reader's message)
+        detail = str(err).splitlines()[0].replace(str(path), path.name) if str(err) else "no detail"
+        return None, f"unreadable ({type(err).__name__}: {detail if len(detail) <= 100 else detail[:97] + '...'})"
     stored = ds.attrs.get("case_inputs")
     if stored is None:
         return None, "made by an older workbench (no record of its inputs)"
