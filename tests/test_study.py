@@ -697,3 +697,21 @@ def test_a_stress_exact_to_round_off_gets_no_order(scheme):
     assert np.isnan(ds.observed_order.sel(norm="error_Q", along="k")).all()
     assert float((ds.error_Q / ds.reference_norm_Q).max()) < 1e-11
     assert np.isfinite(ds.observed_order.sel(norm="error_V", along="k")).all()
+
+
+def test_grids_that_share_too_few_times_are_refused_before_any_work():
+    """Found by an outside pass: fields are compared where every case's grid has a point, and memory_rod at k = 0.08,
+    0.04, 0.02 (13 steps of 0.0769 s beside 25 and 50) shared t = 1 alone; its errors came out 1.7e-5, 4.5e-7,
+    1.5e-6 (the same k = 0.04 case: 6.7e-4 compared at ten times) and the order 1.75 for a first-order rule, without
+    a word. Such a sweep is refused before any work, naming the grids; n_compare = 1 asks for that time alone, and
+    grids that nest, or unequal ones sharing enough points (0.1, 0.07, 0.05: five), are taken."""
+    with pytest.raises(workbench.ParameterError, match=r"share 1 time to compare fields at \(t = 1\), of n_compare = "
+                                                       r"10 asked for \(k = 0.08: 13 steps of 0.07692 s"):
+        Study("memory_rod", k=[0.08, 0.04, 0.02], workers=0)
+    Study("memory_rod", k=[0.08, 0.04, 0.02], n_compare=1, workers=0)
+    Study("memory_rod", k=[0.04, 0.02, 0.01], workers=0)
+    Study("tp1", k=[0.1, 0.07, 0.05], workers=0)
+    with pytest.raises(workbench.ParameterError, match="share 2 times"):  # (a finer run off the cases' grids)
+        Study("tp5", h=0.1, k=[0.01, 0.005], T=0.3, reference={"k": 7e-5}, workers=0)
+    p = _cli("study", "memory_rod", "--k", "0.08", "0.04", "0.02", "--workers", "0", "--no-progress")
+    assert p.returncode == 2 and "Traceback" not in p.stderr and len(p.stderr.strip().splitlines()) == 1, p.stderr
