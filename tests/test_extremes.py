@@ -289,3 +289,29 @@ def test_unstable_explicit_run_is_stopped():
     with warnings.catch_warnings(), pytest.raises(workbench.Diverged):
         warnings.simplefilter("ignore", RuntimeWarning)  # the allow_unstable warning is expected
         workbench.run("slab", progress=False, allow_unstable=True, **STIFF, traction_top=SINE, T=0.5, k=0.01)
+
+
+def _rod_in_units(s: float, **kw) -> dict:
+    """The rod with compliance, a gap and glue, moved by a sine, in units whose time is s seconds and stress 1/s Pa
+    (lengths in metres): every value given in those units (S L s = 1 keeps the bonding law's rate unchanged)."""
+    S = 1.0 / s
+    return dict(dict(length=1.0, h=0.1, k=0.01 * s, T=s, a=S, b=S * s, c_nu=5 * S, m_nu=3.0, gap=0.01, gamma_nu=0.3 * S,
+                L=0.3, eps_a=0.001 * S, delta=f"0.1*sin({10 / s!r}*t)", u0="0", probes=[[0.5], [1.0]],
+                snapshots=[0.5 * s], k_min=1e-9 * s), **kw)
+
+
+def test_a_run_in_other_time_units_is_the_same_run():
+    """Found by an outside pass (dimensional analysis): error control floored the step at 1e-10 s whatever T
+    (1e-12 max(1, T) x 100), over the k_min given, so the same rod in microseconds took other steps (and the tp4 slab
+    with E = 1e12 Pa, T = 5e-7 s stopped at t = 0 with StepTooSmall); and the records matched times within 1e-9 s, so
+    a run of T = 1e-9 s kept a field snapshot at every step (101, none asked for). Both are relative to T now: backward
+    Euler under rtol takes the same steps in seconds and in microseconds (2469), u the same to 1e-9, and the snapshots
+    asked for are the ones kept."""
+    base = workbench.run("rod", progress=False, **_rod_in_units(1.0, scheme="implicit", rtol=1e-4, atol=1e-9))
+    fast = workbench.run("rod", progress=False, **_rod_in_units(1e-6, scheme="implicit", rtol=1e-4, atol=1e-9))
+    assert fast.attrs["nsteps"] == base.attrs["nsteps"] and fast.attrs["rejected_steps"] == base.attrs["rejected_steps"]
+    np.testing.assert_allclose(fast.time.values, base.time.values * 1e-6, rtol=1e-9, atol=0)
+    np.testing.assert_allclose(fast.u_probe.values, base.u_probe.values, rtol=0, atol=1e-9 * abs(base.u_probe).max())
+    for s in (1e-8, 1e-9):
+        tiny = workbench.run("rod", progress=False, **_rod_in_units(s))
+        assert tiny.sizes["snapshot"] == 2 and tiny.attrs["nsteps"] == 100

@@ -153,7 +153,7 @@ class Recorder:
                  every_step: bool = False):
         self.disc, self.observer = disc, observer
         self.T = float(T)
-        self.tol = 1e-9 * max(1.0, self.T)
+        self.tol = 1e-9 * self.T  # (relative: T = 1e-9 s kept a snapshot at every step within 1e-9 s)
         self.snapshot_times = sorted({float(t) for t in snapshots} | {self.T})
         self.record_times = None if record_times is None else np.sort(np.asarray(record_times, dtype=float))
         self.spacing = self.T / max_records

@@ -389,7 +389,7 @@ def check_grid(path, grid: np.ndarray, state: dict, archive: xr.Dataset) -> None
     bitwise (then the continued run equals the straight one to round-off only)."""
     i, t = int(state["steps"]["index"]), state["time"]
     T = float(grid[-1])
-    tol = 1e-9 * max(1.0, T)
+    tol = 1e-9 * T  # (relative: a run of T = 1e-9 s is no coarser in time than one of 1 s)
     if i >= len(grid) or abs(grid[i] - t) > tol:
         where = f"t = {float(grid[i])!r} s there" if i < len(grid) else "beyond its end"
         raise ParameterError(f"restart {str(path)!r}: the archive's time t = {t!r} s (step {i}) is not step {i} of the "

@@ -45,7 +45,7 @@ def time_grid(T: float, k: float, times=None, sync=()) -> np.ndarray:
     >>> float(time_grid(1.0, 0.1, sync=(0.3,))[3])  # not 0.30000000000000004
     0.3
     """
-    tol = 1e-9 * max(1.0, T)
+    tol = 1e-9 * T  # (relative: a run of T = 1e-9 s is no coarser in time than one of 1 s)
     sync = sorted({float(s) for s in sync})
     outside = [s for s in sync if not -tol <= s <= T + tol]
     if outside:
@@ -58,7 +58,7 @@ def time_grid(T: float, k: float, times=None, sync=()) -> np.ndarray:
             raise ValueError("times: the grid must start at 0 and increase strictly")
         if np.min(np.diff(grid)) <= tol:  # (times that close are one time wherever times are matched)
             raise ValueError(f"times: a step of {np.min(np.diff(grid)):.3g} s is below the times told apart, "
-                             f"1e-9 max(1, T) = {tol:.3g} s")
+                             f"1e-9 T = {tol:.3g} s")
         if abs(grid[-1] - T) > tol:
             raise ValueError(f"times: the grid ends at {grid[-1]:g}, not at T = {T:g}; end it at T or set T")
         off = [s for s in sync if np.min(np.abs(grid - s)) > tol]
@@ -187,7 +187,7 @@ class AdaptiveSteps:
     def __init__(self, T, k0, *, rtol, atol, k_min, k_max, order, sync=(), t0=0.0, admissible=None, kinks=(),
                  loads=()):
         self.t, self.T, self.k = float(t0), float(T), float(min(k0, k_max))
-        self.tol = 1e-12 * max(1.0, T)
+        self.tol = 1e-12 * T
         # (a step below ~1e-10 T cannot be told from round-off in t: k_min = 1e-300 would divide by t - t_prev = 0)
         self.k_floor = 100 * self.tol
         self.k0, self.rtol, self.atol, self.k_min, self.k_max = float(k0), rtol, atol, max(k_min, self.k_floor), k_max

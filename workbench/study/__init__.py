@@ -165,7 +165,7 @@ class Study:
             return common, common[1:]
         grids = [time_grid(T, k) for k in ks]
         coarse = grids[int(np.argmin([len(g) for g in grids]))]
-        common = np.array([t for t in coarse if all(np.min(np.abs(g - t)) <= 1e-9 * max(T, 1.0) for g in grids)])
+        common = np.array([t for t in coarse if all(np.min(np.abs(g - t)) <= 1e-9 * T for g in grids)])
         idx = np.unique(np.round(np.linspace(0, len(common) - 1, self.n_compare + 1)).astype(int))[1:]
         return common, common[idx]
 

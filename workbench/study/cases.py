@@ -247,7 +247,7 @@ def extension(path: Path, expected: dict):
     others += [k for k in set(a) | set(b) if k not in _EXTENDED and canonical(a.get(k)) != canonical(b.get(k))]
     if others or not T0 < T:
         return None, None
-    tol = 1e-9 * max(1.0, T)
+    tol = 1e-9 * T  # (relative: a run of T = 1e-9 s is no coarser in time than one of 1 s)
     if is_adaptive(b.get("rtol", 0.0)):
         return None, "an error-controlled case is not continued to a longer T (its steps landed on its own T)"
     if b.get("kernel_approximation") == "exponentials":

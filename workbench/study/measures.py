@@ -106,7 +106,7 @@ def run_records(ds: xr.Dataset, max_records: int | None = None) -> xr.Dataset:
     t = ds.time.values
     T = float(ds.attrs["T"])
     spacing = T / max_records
-    final = abs(t[-1] - T) <= 1e-9 * max(1.0, T) and len(t) == n_steps + 1
+    final = abs(t[-1] - T) <= 1e-9 * T and len(t) == n_steps + 1
     keep, last = [0], t[0]
     for i in range(1, len(t)):  # the rule of workbench.output.results.Recorder
         if (final and i == len(t) - 1) or t[i] - last >= spacing * (1 - 1e-9):
