@@ -315,3 +315,22 @@ def test_a_run_in_other_time_units_is_the_same_run():
     for s in (1e-8, 1e-9):
         tiny = workbench.run("rod", progress=False, **_rod_in_units(s))
         assert tiny.sizes["snapshot"] == 2 and tiny.attrs["nsteps"] == 100
+
+
+def test_model_b_in_other_units_and_the_prony_moduli_unit():
+    """memory_rod in millimetres, kiloseconds and megapascals is the same run when each value is converted by its
+    unit; the Prony moduli convert as Pa/s (their label said Pa: so converted, the run diverged; found by an outside
+    pass)."""
+    L, s, S = 1e-3, 1e3, 1e6
+
+    def values(L, s, S):
+        return dict(length=L, h=0.05 * L, k=0.01 * s, T=s, a=S, gap=0.1 * L, F=0.05 * S, c=S / L, probes=[[L]],
+                    delta=f"{0.3 * L!r}*sin({2 * np.pi / s!r}*t) - {0.05 * L!r}", snapshots=[],
+                    prony=[[0.5 * S / s, 0.2 * s]])
+    base = workbench.run("memory_rod", progress=False, **values(1.0, 1.0, 1.0))
+    other = workbench.run("memory_rod", progress=False, **values(L, s, S))
+    assert base.attrs["prony_units"] == "Pa/s, 1, s"
+    np.testing.assert_allclose(other.u_probe.values / L, base.u_probe.values, rtol=0,
+                               atol=1e-12 * abs(base.u_probe).max())
+    np.testing.assert_allclose(other.contact_pressure.values / S, base.contact_pressure.values, rtol=0,
+                               atol=1e-12 * abs(base.contact_pressure).max())

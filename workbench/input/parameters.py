@@ -147,7 +147,7 @@ _TABLE: dict[str, Param] = {p.name: p for p in [
        choices=("quadrature", "exponentials")),
     _p("kernel_tol", 1e-6, "1", "Model B: the error bound of the exponential-sum kernel, relative to max |b| on "
        "[0, T]", lower=1e-12, upper=0.1),
-    _p("prony", (), "Pa, 1, s", "Prony series B(t) = sum_i C(E_i, nu_i) exp(-t / tau_i): list of (E_i, nu_i, tau_i) "
+    _p("prony", (), "Pa/s, 1, s", "Prony series B(t) = sum_i C(E_i, nu_i) exp(-t / tau_i): list of (E_i, nu_i, tau_i) "
        "(rod: (E_i, tau_i))", "points"),
     # loads and prescribed displacements
     _p("delta", "0", "m", "prescribed rod-end displacement u(0, t)", "expr", variables=("t",)),
