@@ -158,8 +158,8 @@ def warnings_for(scene, model, used: dict | None = None) -> list:
         out.append(f"{scene.name}: P1 elements on a thin body (thickness / length = {g.aspect():.2g}) lock in bending, "
                    "so displacements come out too small (the block at h = 0.05: 50 %; the slab at h = 0.0125: 5 %); "
                    "order = 2 converges at the same cost")
-    return (out + _locking(scene, model, g) + _contact_zone(scene, g) + _held_apex(scene, g) + _quadrature_cost(scene, model)
-            + _kernel_fit(scene, model) + _unused(scene) + _underived(scene) + _ignored_by_the_solver(scene, used or {}))
+    return (out + _locking(scene, model, g) + _contact_zone(scene, g) + _held_apex(scene, g)
+            + _quadrature_cost(scene, model) + _kernel_fit(scene, model) + _unused(scene) + _underived(scene) + _ignored_by_the_solver(scene, used or {}))
 
 
 def _locking(scene, model, g) -> list:
