@@ -355,3 +355,16 @@ def test_p1_near_incompressibility_is_warned_about():
     with pytest.warns(RuntimeWarning, match="P1 only: refine h"):
         workbench.run("memory_block", nu=0.4999, prony=[[-1000.0, 0.4999, 0.5]], T=0.05, k=0.05, snapshots=[],
                       progress=False)
+
+
+def test_a_reference_ode_too_stiff_for_its_solver_says_so():
+    """rod_ode on c_nu = 1e15, m_nu = 3 (a run the implicit scheme completes) ended in SciPy's bare "array must not
+    contain infs or NaNs" (found by an outside pass); it says now what failed and why, and a Study whose default
+    reference it is warns and takes the next reference."""
+    p = dict(length=1.0, h=0.1, T=1.0, a=1.0, b=1.0, c_nu=1e15, m_nu=3.0, gap=0.01, gamma_nu=0.3, L=0.3, eps_a=0.001,
+             delta="0.1*sin(10*t)", u0="0", scheme="implicit")
+    with pytest.raises(RuntimeError, match=r"reference ODE failed: SciPy's Radau met an overflow .* too stiff"):
+        references.rod_ode(workbench.scene("rod", k=0.001, **p))
+    with pytest.warns(RuntimeWarning, match="the scene's own reference cannot be computed"):
+        st = workbench.Study("rod", k=[0.01, 0.005, 0.0025], workers=0, **p)
+    assert st.reference.kind == "difference"

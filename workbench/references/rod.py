@@ -111,8 +111,16 @@ def rod_ode(scene, rtol=1e-11, atol=1e-13, model=None):
     comp, pull = terms.get("compliance"), terms.get("adhesion")
     stiffness = (a + ell * ((comp.c_nu if comp else 0.0) + (pull.gamma_nu if pull else 0.0))) / b
     max_step = T / 200 if stiffness * T / 200 <= 10.0 else T / 2000
-    sol = solve_ivp(rhs, (0.0, T), [0.0, beta0], method="Radau", rtol=rtol, atol=atol, dense_output=True,
-                    max_step=max_step)
+    try:
+        with np.errstate(over="ignore", invalid="ignore"):  # (said below, as the failure it leads to)
+            sol = solve_ivp(rhs, (0.0, T), [0.0, beta0], method="Radau", rtol=rtol, atol=atol, dense_output=True,
+                            max_step=max_step)
+    except (ValueError, FloatingPointError, OverflowError) as err:
+        # (c_nu = 1e15, m_nu = 3: Radau's trial states overflow the compliance, and SciPy's own ValueError, "array
+        # must not contain infs or NaNs", was all a user saw; found by an outside pass)
+        raise RuntimeError(f"reference ODE failed: SciPy's Radau met an overflow ({err}); the rod's laws are too "
+                           f"stiff for it here (rate (a + length (c_nu + gamma_nu)) / b = {stiffness:.3g} 1/s): "
+                           "compare with a finer run instead") from None
     if not sol.success:
         raise RuntimeError(f"reference ODE failed: {sol.message}")
 

@@ -368,6 +368,9 @@ def _auto(scene, cases, axes, layout):
             rod_reference(scene)  # (a rod whose reduced ODE or Volterra equation applies)
         except (ValueError, ParameterError):
             pass
+        except RuntimeError as err:  # (it applies, but its solver fails: said, and the next reference taken)
+            warnings.warn(f"reference: the scene's own reference cannot be computed ({err}); the study takes the "
+                          "next one", RuntimeWarning, stacklevel=4)
         else:
             return SolutionReference(rod_reference, describe="auto: the scene's own reference (exact, ODE or Volterra: "
                                                              "workbench.references.rod_reference)")
