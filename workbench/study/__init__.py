@@ -69,7 +69,8 @@ class Study:
         reference, ``rel_error_<name>`` compares each with the reference's value.
     n_compare : int
         Number of common times at which whole fields are compared (default 10, T included): spread over the
-        points every case's grid shares; a sweep whose grids share fewer than half of them is refused.
+        points every case's grid shares; where they share fewer than half of them, each case is compared at its
+        own grid's points nearest them against a solution reference, and the sweep is refused against a run.
     workers : int
         Local worker subprocesses running cases in parallel (default 2); 0 runs the cases
         in this process, one after another.
@@ -118,6 +119,9 @@ class Study:
         self._scenes = {}
         self.dataset = None
         self.overhead = {}
+        #: Whether each case is compared at its own grid's points nearest the comparison times (:meth:`compared`):
+        #: grids that share too few points, against a solution reference, which is known at any time.
+        self._own_times = False
         if self.reference is not None:
             self._check_times()
 
@@ -160,7 +164,7 @@ class Study:
         T = self.scene["T"]
         every = self.cases + (self.reference.cases() if self.reference else [])
         ks = sorted({c.k for c in every if not self._adaptive(c)}, reverse=True)
-        if not ks:
+        if not ks or self._own_times:
             common = np.linspace(0.0, T, self.n_compare + 1)
             return common, common[1:]
         grids = [time_grid(T, k) for k in ks]
@@ -189,6 +193,9 @@ class Study:
         coarse = min(len(time_grid(T, k)) - 1 for k in fixed)
         if 2 * len(compare) >= min(self.n_compare, coarse):
             return
+        if self.reference.kind == "solution":  # (a solution is known at any time: each case at its own points)
+            self._own_times = True
+            return
         grids = ", ".join(f"k = {k:g}: {len(time_grid(T, k)) - 1} steps of {T / (len(time_grid(T, k)) - 1):.4g} s"
                           for k in fixed[:4]) + (", ..." if len(fixed) > 4 else "")
         raise ParameterError(f"the cases' step grids (and the reference's) share {len(compare)} time"
@@ -199,7 +206,19 @@ class Study:
                              f"the finer ones), or n_compare = {len(compare)} to compare there")
 
     def _record_times(self, case, record, compare):
-        return [0.0] + list(compare) if self._adaptive(case) else list(record)
+        own = self._own_times and not self._adaptive(case)
+        return [0.0] + self.compared(case, compare) if self._adaptive(case) or own else list(record)
+
+    def compared(self, case, compare) -> list:
+        """The times ``case`` is compared at: the study's comparison times ``compare``, or, where the cases' grids
+        share too few of them and the reference is a solution (:meth:`_check_times`), the points of the case's own
+        grid nearest them (memory_rod at k = 0.08, 0.04, 0.02 against its Volterra solution: 0.0769, 0.231, ...)."""
+        if not self._own_times or self._adaptive(case):
+            return [float(t) for t in compare]
+        from ..schemes.stepping import time_grid
+
+        grid = time_grid(self.scene["T"], case.k)
+        return sorted({float(grid[np.argmin(np.abs(grid - t))]) for t in compare} - {0.0})
 
     # -- running ---------------------------------------------------------------------------------------
     def run(self, archive=None, *, progress=None, extend=True) -> xr.Dataset:
@@ -223,7 +242,7 @@ class Study:
         archive = _archive_folder(archive)
         todo = list(dict.fromkeys(self.listed + (self.reference.cases() if self.reference else [])))
         runs, missing, expected, plans = self._archived(todo, archive, record, compare, extend)
-        tasks = [(c, (self.scene, c.values(), self._record_times(c, record, compare), list(compare),
+        tasks = [(c, (self.scene, c.values(), self._record_times(c, record, compare), self.compared(c, compare),
                       {"case_inputs": canonical(expected[c]), "case_fingerprint": fingerprint(expected[c])},
                       plans.get(c)))
                  for c in missing]
@@ -256,7 +275,8 @@ class Study:
         case's inputs, the plans of the cases that continue an archived run to a longer T)."""
         runs, missing, expected, plans = {}, [], {}, {}
         for case in todo:
-            expected[case] = inputs(self.scene_of(case, compare), self._record_times(case, record, compare), compare)
+            own = self.compared(case, compare)
+            expected[case] = inputs(self.scene_of(case, own), self._record_times(case, record, compare), own)
             path = archive / f"{case.key}.nc"
             ds, reason = read_case(path, expected[case])
             if ds is not None:

@@ -335,8 +335,8 @@ def study_dataset(study, runs: dict, compare, history: str) -> xr.Dataset:
                 "status": a["status"] if not a.get("failure_type") or a["status"] == "refused"
                 else f"{a['status']} ({a['failure_type']})"}
         if ref is not None and a["status"] == "complete":
-            err = ref.errors(case, study.scene_of(case, compare), ds, runs, compare,
-                             lambda c: study.scene_of(c, compare))
+            own = study.compared(case, compare)
+            err = ref.errors(case, study.scene_of(case, own), ds, runs, own, lambda c: study.scene_of(c, compare))
             methods.add(err.pop("transfer", "same mesh / exact solution"))
             row |= err
         if study.measures is not None:
@@ -360,8 +360,9 @@ def study_dataset(study, runs: dict, compare, history: str) -> xr.Dataset:
     if ref is not None and ref.kind == "difference":
         extrapolate(ds, study.layout, ref)
     _say_roundoff(ds)
-    ds["compare_time"] = ("compare", np.asarray(compare), {"units": "s",
-                                                           "long_name": "times at which fields are compared"})
+    ds["compare_time"] = ("compare", np.asarray(compare), {"units": "s", "long_name": "times at which fields are "
+                                                           "compared" + (" (each case at its own grid's points "
+                                                                         "nearest them)" if study._own_times else "")})
     for name in set(ds.coords) & {"h", "k"}:
         ds[name].attrs.update(units="s" if name == "k" else "m", long_name="time step" if name == "k" else "target "
                               "element size")
