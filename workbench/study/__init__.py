@@ -179,7 +179,8 @@ class Study:
         pass: memory_rod at k = 0.08, 0.04, 0.02 (13 steps of 0.0769 s beside 25 and 50) shared t = 1 alone, where its
         error was 2900 times below that of the same k = 0.04 case compared at ten times, and the order came out 1.75
         for a first-order rule. Fewer than half of those asked for (of the coarsest grid's points, where it has fewer)
-        is refused, naming the grids; ``n_compare`` given as the number the grids share accepts it."""
+        is refused against a run, naming the grids (``n_compare`` given as the number the grids share accepts it);
+        against a solution, known at any time, each case is compared at its own points instead (:meth:`compared`)."""
         from ..schemes.stepping import time_grid
 
         if self.n_compare == 1:
