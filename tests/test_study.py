@@ -724,3 +724,12 @@ def test_grids_that_share_too_few_times_are_compared_at_their_own_or_refused():
     p = _cli("study", "tp5", "--h", "0.1", "--k", "0.08", "0.04", "0.02", "--set", "T=0.3", "--workers", "0",
              "--no-progress")
     assert p.returncode == 2 and "Traceback" not in p.stderr and len(p.stderr.strip().splitlines()) == 1, p.stderr
+
+def test_a_case_too_large_for_the_machine_is_refused_before_any_case_runs(tmp_path):
+    """A P2 block at a tiny h was accepted by a Study, its case to be refused in its worker after the others had run
+    (found by an outside pass); the sweep is refused before any case runs, naming the case."""
+    st = Study("block", h=[0.25, 0.002], order=2, k=0.005, T=0.01, workers=0)
+    with pytest.raises(workbench.ParameterError, match=r"study case h = 0.002, order = 2, k = 0.005: h = 0.002 "
+                                                       r"\(order 2\) gives about .* displacement dofs"):
+        st.run(tmp_path, progress=False)
+    assert not list(tmp_path.glob("*.nc"))

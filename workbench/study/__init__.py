@@ -243,6 +243,7 @@ class Study:
         archive = _archive_folder(archive)
         todo = list(dict.fromkeys(self.listed + (self.reference.cases() if self.reference else [])))
         runs, missing, expected, plans = self._archived(todo, archive, record, compare, extend)
+        _fits(self.scene_of(c) for c in missing)
         tasks = [(c, (self.scene, c.values(), self._record_times(c, record, compare), self.compared(c, compare),
                       {"case_inputs": canonical(expected[c]), "case_fingerprint": fingerprint(expected[c])},
                       plans.get(c)))
@@ -335,6 +336,20 @@ class Study:
         if self.dataset is None:
             raise ParameterError("Study.cheapest: run the study first (Study.run)")
         return cheapest(self.dataset, tolerance, error=error, cost=cost)
+
+
+def _fits(scenes) -> None:
+    """Refuse, before any case runs, a sweep with a case whose factorisation cannot fit in this machine's free
+    memory, naming it (:func:`workbench.running.preflight.resources`): a P2 block at h = 0.005 was accepted, its case
+    to be refused in its worker after the others had run (found by an outside pass)."""
+    from ..running import preflight
+
+    for sc in scenes:
+        try:
+            preflight.resources(sc, sc.model_of(), 0)
+        except ParameterError as err:
+            raise ParameterError(f"study case {', '.join(f'{n} = {sc[n]}' for n in ('h', 'order', 'k'))}: "
+                                 f"{err}") from None
 
 
 def _archive_folder(archive) -> Path:
