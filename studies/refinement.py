@@ -26,7 +26,7 @@ STUDIES = {
     "rod_tp2": lambda q: dict(scene="tp2", k=[0.04, 0.02, 0.01, 0.005, 0.0025], reference="ode"),
     "slab": lambda q: dict(scene="tp5", h=[0.05, 0.025, 0.0125] + ([] if q else [0.00625, 0.003125]),
                            k_over_h=0.2, order=[1, 2], n_compare=10, reference="finest"),
-    "memory": lambda q: dict(scene="memory_slab", h=[0.2, 0.1, 0.05] + ([] if q else [0.025, 0.0125]),
+    "memory": lambda q: dict(scene="memory_slab", h=[0.25, 0.125, 0.0625] + ([] if q else [0.03125, 0.015625]),
                              k_over_h=0.4, n_compare=10, reference="finest"),
 }
 GROUPS = {"rod": ["rod_tp1", "rod_tp2"], "slab": ["slab"], "memory": ["memory"]}

@@ -154,13 +154,15 @@ def test_limits(overrides):
 
 @pytest.mark.slow
 def test_memory_slab_coupled_refinement():
-    """Coupled k = 0.4 h against the finest case: order >= 0.9 in ||u - u_ref||_V (measured 0.91 over 5 levels). The
-    finest case as the reference overstates the order (its own error is not small against the others'): the
-    extrapolated reference (the default here) measures 0.77 on the same cases, asserted >= 0.6 (docs/models.md)."""
-    st = Study("memory_slab", h=[0.2, 0.1, 0.05, 0.025], k_over_h=0.4, n_compare=4, workers=2, reference="finest")
+    """Coupled k = 0.4 h against the finest case: order >= 0.9 in ||u - u_ref||_V (measured 0.91). The finest case as
+    the reference overstates the order (its own error is not small against the others'): the extrapolated reference
+    (the default here) measures 0.74 on the same cases, asserted >= 0.6 (docs/reproduction.md). (h = 0.2 ... 0.025
+    had k = 0.08 ... 0.01, whose grids share t = 1 alone: that is refused now, docs/conventions.md.)"""
+    hs = [0.25, 0.125, 0.0625, 0.03125]  # (k = 0.1 ... 0.0125: grids that nest, compared at four times)
+    st = Study("memory_slab", h=hs, k_over_h=0.4, n_compare=4, workers=2, reference="finest")
     st.run(progress=False)
     st.assert_order(1.0, tol=0.1, norm="error_V", at_least=True)
-    extrapolated = Study("memory_slab", h=[0.2, 0.1, 0.05, 0.025], k_over_h=0.4, n_compare=4, workers=2)
+    extrapolated = Study("memory_slab", h=hs, k_over_h=0.4, n_compare=4, workers=2)
     extrapolated.run(progress=False)
     assert extrapolated.dataset.attrs["reference"].startswith("auto: extrapolated")
     extrapolated.assert_order(1.0, tol=0.4, norm="error_V", at_least=True)

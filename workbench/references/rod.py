@@ -86,8 +86,6 @@ def rod_ode(scene, rtol=1e-11, atol=1e-13, model=None):
         ``solution(t, x=length) -> (u(x, t), beta(t))`` (dense output, vectorised in t),
         with ``strain(t)`` and ``stress(t)``.
     """
-    from scipy.integrate import solve_ivp
-
     model = model or scene.model_of()
     if model.geometry.dim != 1 or model.viscous is None:
         raise ValueError(f"rod_ode needs a Kelvin-Voigt (Model A) rod scene, got {scene.name!r}")
@@ -111,9 +109,24 @@ def rod_ode(scene, rtol=1e-11, atol=1e-13, model=None):
     comp, pull = terms.get("compliance"), terms.get("adhesion")
     stiffness = (a + ell * ((comp.c_nu if comp else 0.0) + (pull.gamma_nu if pull else 0.0))) / b
     max_step = T / 200 if stiffness * T / 200 <= 10.0 else T / 2000
+    sol = _radau(rhs, T, [0.0, beta0], rtol, atol, max_step, stiffness)
+
+    def strain_rate(t):
+        y = sol.sol(t)
+        return np.array([rhs(ti, yi)[0] for ti, yi in zip(np.atleast_1d(t), np.atleast_2d(y.T))]).reshape(np.shape(t))
+
+    return RodSolution(delta=lambda t: np.broadcast_to(np.asarray(delta(t=t), dtype=float), np.shape(t)).copy(),
+                       strain=lambda t: sol.sol(t)[0], strain_rate=strain_rate, beta=lambda t: sol.sol(t)[1],
+                       a=a, b=b)
+
+
+def _radau(rhs, T, y0, rtol, atol, max_step, stiffness):
+    """SciPy's Radau on [0, T] with dense output; a RuntimeError saying why where it fails."""
+    from scipy.integrate import solve_ivp
+
     try:
         with np.errstate(over="ignore", invalid="ignore"):  # (said below, as the failure it leads to)
-            sol = solve_ivp(rhs, (0.0, T), [0.0, beta0], method="Radau", rtol=rtol, atol=atol, dense_output=True,
+            sol = solve_ivp(rhs, (0.0, T), y0, method="Radau", rtol=rtol, atol=atol, dense_output=True,
                             max_step=max_step)
     except (ValueError, FloatingPointError, OverflowError) as err:
         # (c_nu = 1e15, m_nu = 3: Radau's trial states overflow the compliance, and SciPy's own ValueError, "array
@@ -123,14 +136,7 @@ def rod_ode(scene, rtol=1e-11, atol=1e-13, model=None):
                            "compare with a finer run instead") from None
     if not sol.success:
         raise RuntimeError(f"reference ODE failed: {sol.message}")
-
-    def strain_rate(t):
-        y = sol.sol(t)
-        return np.array([rhs(ti, yi)[0] for ti, yi in zip(np.atleast_1d(t), np.atleast_2d(y.T))]).reshape(np.shape(t))
-
-    return RodSolution(delta=lambda t: np.broadcast_to(np.asarray(delta(t=t), dtype=float), np.shape(t)).copy(),
-                       strain=lambda t: sol.sol(t)[0], strain_rate=strain_rate, beta=lambda t: sol.sol(t)[1],
-                       a=a, b=b)
+    return sol
 
 
 def _rod_terms(model):

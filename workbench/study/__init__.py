@@ -28,7 +28,7 @@ import xarray as xr
 from ..errors import ParameterError
 from ..input import numerics, scenes
 from ..output import results
-from . import evaluate, execute, reference
+from . import evaluate, execute, reference, times
 from .cases import BASE_AXES, Case, canonical, expand, extension, fingerprint, inputs, positive_int, read_case
 from .evaluate import fit_order
 
@@ -119,11 +119,10 @@ class Study:
         self._scenes = {}
         self.dataset = None
         self.overhead = {}
-        #: Whether each case is compared at its own grid's points nearest the comparison times (:meth:`compared`):
-        #: grids that share too few points, against a solution reference, which is known at any time.
-        self._own_times = False
-        if self.reference is not None:
-            self._check_times()
+        #: Whether each case is compared at its own grid's points nearest the comparison times: grids that share too
+        #: few points, against a solution reference, which is known at any time (:mod:`.times`).
+        self.own_times = False
+        self.own_times = self.reference is not None and times.check(self)
 
     # -- backwards-compatible views -----------------------------------------------------------------
     @property
@@ -153,74 +152,6 @@ class Study:
         """Whether the case runs error-controlled steps (rtol > 0): its k is only the first step."""
         return numerics.from_scene(self.scene_of(case)).adaptive
 
-    def _times(self):
-        """Common record times (the coarsest fixed grid, if on every fixed grid) and the field comparison times.
-
-        Error-controlled cases have no grid: they are compared (and recorded) at the comparison times, which
-        their step controller lands on; with only such cases these are n_compare equal stretches of [0, T].
-        """
-        from ..running.runner import time_grid
-
-        T = self.scene["T"]
-        every = self.cases + (self.reference.cases() if self.reference else [])
-        ks = sorted({c.k for c in every if not self._adaptive(c)}, reverse=True)
-        if not ks or self._own_times:
-            common = np.linspace(0.0, T, self.n_compare + 1)
-            return common, common[1:]
-        grids = [time_grid(T, k) for k in ks]
-        coarse = grids[int(np.argmin([len(g) for g in grids]))]
-        common = np.array([t for t in coarse if all(np.min(np.abs(g - t)) <= 1e-9 * T for g in grids)])
-        idx = np.unique(np.round(np.linspace(0, len(common) - 1, self.n_compare + 1)).astype(int))[1:]
-        return common, common[idx]
-
-    def _check_times(self):
-        """Refuse, before any work, comparison times too few for the errors to mean anything: fields are compared
-        where every case's grid has a point (:meth:`_times`), and grids that do not nest share few. Found by an outside
-        pass: memory_rod at k = 0.08, 0.04, 0.02 (13 steps of 0.0769 s beside 25 and 50) shared t = 1 alone, where its
-        error was 2900 times below that of the same k = 0.04 case compared at ten times, and the order came out 1.75
-        for a first-order rule. Fewer than half of those asked for (of the coarsest grid's points, where it has fewer)
-        is refused against a run, naming the grids (``n_compare`` given as the number the grids share accepts it);
-        against a solution, known at any time, each case is compared at its own points instead (:meth:`compared`)."""
-        from ..schemes.stepping import time_grid
-
-        if self.n_compare == 1:
-            return
-        T = self.scene["T"]
-        record, compare = self._times()
-        every = self.cases + (self.reference.cases() if self.reference else [])
-        fixed = sorted({c.k for c in every if not self._adaptive(c)}, reverse=True)
-        if not fixed:
-            return
-        coarse = min(len(time_grid(T, k)) - 1 for k in fixed)
-        if 2 * len(compare) >= min(self.n_compare, coarse):
-            return
-        if self.reference.kind == "solution":  # (a solution is known at any time: each case at its own points)
-            self._own_times = True
-            return
-        grids = ", ".join(f"k = {k:g}: {len(time_grid(T, k)) - 1} steps of {T / (len(time_grid(T, k)) - 1):.4g} s"
-                          for k in fixed[:4]) + (", ..." if len(fixed) > 4 else "")
-        raise ParameterError(f"the cases' step grids (and the reference's) share {len(compare)} time"
-                             f"{'s' if len(compare) > 1 else ''} to compare fields at (t = "
-                             f"{', '.join(f'{t:.4g}' for t in compare[:5])}{', ...' if len(compare) > 5 else ''}), of "
-                             f"n_compare = {self.n_compare} asked for ({grids}): errors seen that rarely can miss the "
-                             "error entirely. Give steps whose grids nest (T / k whole numbers, each grid a part of "
-                             f"the finer ones), or n_compare = {len(compare)} to compare there")
-
-    def _record_times(self, case, record, compare):
-        own = self._own_times and not self._adaptive(case)
-        return [0.0] + self.compared(case, compare) if self._adaptive(case) or own else list(record)
-
-    def compared(self, case, compare) -> list:
-        """The times ``case`` is compared at: the study's comparison times ``compare``, or, where the cases' grids
-        share too few of them and the reference is a solution (:meth:`_check_times`), the points of the case's own
-        grid nearest them (memory_rod at k = 0.08, 0.04, 0.02 against its Volterra solution: 0.0769, 0.231, ...)."""
-        if not self._own_times or self._adaptive(case):
-            return [float(t) for t in compare]
-        from ..schemes.stepping import time_grid
-
-        grid = time_grid(self.scene["T"], case.k)
-        return sorted({float(grid[np.argmin(np.abs(grid - t))]) for t in compare} - {0.0})
-
     # -- running ---------------------------------------------------------------------------------------
     def run(self, archive=None, *, progress=None, extend=True) -> xr.Dataset:
         """Run the cases that have no valid archive (each archived on completion in ``archive``), then evaluate.
@@ -239,12 +170,13 @@ class Study:
         """
         from ..schemes.stepping import progress_bar
 
-        record, compare = self._times()
+        record, compare = times.common(self)
         archive = _archive_folder(archive)
         todo = list(dict.fromkeys(self.listed + (self.reference.cases() if self.reference else [])))
         runs, missing, expected, plans = self._archived(todo, archive, record, compare, extend)
         _fits(self.scene_of(c) for c in missing)
-        tasks = [(c, (self.scene, c.values(), self._record_times(c, record, compare), self.compared(c, compare),
+        tasks = [(c, (self.scene, c.values(), times.record_times(self, c, record, compare),
+                      times.compared(self, c, compare),
                       {"case_inputs": canonical(expected[c]), "case_fingerprint": fingerprint(expected[c])},
                       plans.get(c)))
                  for c in missing]
@@ -277,8 +209,8 @@ class Study:
         case's inputs, the plans of the cases that continue an archived run to a longer T)."""
         runs, missing, expected, plans = {}, [], {}, {}
         for case in todo:
-            own = self.compared(case, compare)
-            expected[case] = inputs(self.scene_of(case, own), self._record_times(case, record, compare), own)
+            own = times.compared(self, case, compare)
+            expected[case] = inputs(self.scene_of(case, own), times.record_times(self, case, record, compare), own)
             path = archive / f"{case.key}.nc"
             ds, reason = read_case(path, expected[case])
             if ds is not None:

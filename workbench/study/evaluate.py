@@ -19,6 +19,7 @@ import xarray as xr
 
 from ..input.numerics import REFINEMENT
 from ..output.results import attr_value
+from . import times
 from .cases import canonical
 
 NORMS = ("error", "error_V", "error_Q", "error_beta", "error_beta_end")
@@ -329,13 +330,9 @@ def study_dataset(study, runs: dict, compare, history: str) -> xr.Dataset:
     rows, methods, ref_measures = {}, set(), {}
     for case in study.listed:
         ds = runs[case]
-        a = ds.attrs
-        row = {n: a.get(n, np.nan) for n in COSTS}
-        row |= {"ndof": a["ndof"], "nsteps": a["nsteps"], "complete": int(a["status"] == "complete"),
-                "status": a["status"] if not a.get("failure_type") or a["status"] == "refused"
-                else f"{a['status']} ({a['failure_type']})"}
-        if ref is not None and a["status"] == "complete":
-            own = study.compared(case, compare)
+        row = _costs_and_status(ds.attrs)
+        if ref is not None and ds.attrs["status"] == "complete":
+            own = times.compared(study, case, compare)
             err = ref.errors(case, study.scene_of(case, own), ds, runs, own, lambda c: study.scene_of(c, compare))
             methods.add(err.pop("transfer", "same mesh / exact solution"))
             row |= err
@@ -362,7 +359,7 @@ def study_dataset(study, runs: dict, compare, history: str) -> xr.Dataset:
     _say_roundoff(ds)
     ds["compare_time"] = ("compare", np.asarray(compare), {"units": "s", "long_name": "times at which fields are "
                                                            "compared" + (" (each case at its own grid's points "
-                                                                         "nearest them)" if study._own_times else "")})
+                                                                         "nearest them)" if study.own_times else "")})
     for name in set(ds.coords) & {"h", "k"}:
         ds[name].attrs.update(units="s" if name == "k" else "m", long_name="time step" if name == "k" else "target "
                               "element size")
@@ -382,6 +379,14 @@ def study_dataset(study, runs: dict, compare, history: str) -> xr.Dataset:
         "history": history,
     } | {k: attr_value(v) for k, v in study.scene.values.items() if k not in swept}
     return ds
+
+
+def _costs_and_status(a: dict) -> dict:
+    """A case's row from its run's attributes ``a``: its costs, sizes and how it ended."""
+    return {n: a.get(n, np.nan) for n in COSTS} | {
+        "ndof": a["ndof"], "nsteps": a["nsteps"], "complete": int(a["status"] == "complete"),
+        "status": a["status"] if not a.get("failure_type") or a["status"] == "refused"
+        else f"{a['status']} ({a['failure_type']})"}
 
 
 def _say_roundoff(ds: xr.Dataset) -> None:
