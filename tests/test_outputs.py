@@ -185,3 +185,27 @@ def test_the_p1_strain_operator_from_the_cells_equals_the_assembled_cell_means(n
     fast, assembled = d.fields.cell_strains(u), np.stack([B @ u for B in d.fields._assembled_strains()], axis=1)
     assert fast.shape == assembled.shape == (d.mesh.ne, {2: 3, 3: 6}[d.dim])
     assert np.abs(fast - assembled).max() < 1e-12 * np.abs(assembled).max()
+
+
+def test_an_interrupt_inside_a_record_keeps_the_records_before(monkeypatch):
+    """Found by an outside pass: Ctrl-C (or SIGTERM on the command line) landing while a record was taken, inside the
+    contact pressure's evaluation, left the recorder's lists of unequal lengths; the Dataset could not be made, and
+    the whole run was lost, with "its steps are kept" (1 in 12 timed interrupts on a P2 block). The record cut short
+    is taken back: the records before are the Dataset, and the message names their last time."""
+    from workbench.schemes.model_a import KelvinVoigtObserver
+
+    node_values, calls = KelvinVoigtObserver.node_values, []
+
+    def interrupted(self, t=None):
+        calls.append(t)
+        if len(calls) == 10:
+            raise KeyboardInterrupt
+        return node_values(self, t)
+
+    monkeypatch.setattr(KelvinVoigtObserver, "node_values", interrupted)
+    with pytest.raises(workbench.Interrupted, match=r"its steps to t = 0.08 s are kept") as err:
+        workbench.run("tp4", h=0.1, T=0.2, progress=False)
+    ds = err.value.dataset
+    assert ds is not None and ds.sizes["time"] == 9 and float(ds.time[-1]) == pytest.approx(0.08)
+    assert ds.attrs["status"] == "incomplete" and all(ds[n].sizes["time"] == 9 for n in ds.data_vars
+                                                      if "time" in ds[n].dims)

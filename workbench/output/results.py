@@ -198,36 +198,78 @@ class Recorder:
         return self._wanted(t, final), any(abs(t - s) <= self.tol for s in self.snapshot_times)
 
     def take(self, t: float, wanted: bool, snapshot: bool, control=None) -> None:
-        """Record the state at t as :meth:`due` said."""
-        d, scheme = self.disc, self.observer
+        """Record the state at t as :meth:`due` said. Everything is evaluated before any list grows, and a record cut
+        short is taken back: an interrupt inside the contact pressure's evaluation left the lists of unequal lengths,
+        and the whole run was lost with "its steps are kept" (found by an outside pass)."""
         if wanted:
-            self.last = t
-            self.times.append(t)
-            self.steps.append(self.step)
-            u = d.u.vec.FV().NumPy()
-            self.u_probe.append(d.fields.probe_values())
-            self.u_contact.append(u[d.node_dofs])
-            if d.beta is not None:
-                self.beta.append(d.beta.vec.FV().NumPy()[d.beta_dofs].copy())
-            n = len(self.times)
-            # (a run continued from an archive made with another solver, e.g. on another number of MPI processes,
-            # gives other diagnostics: cg_iterations. A column is NaN at the records that did not give it)
-            for key, val in (scheme.diagnostics() | (control or {})).items():
-                column = self.extra.setdefault(key, [])
-                column.extend([np.nan] * (n - 1 - len(column)))
-                column.append(val)
-            for column in self.extra.values():
-                column.extend([np.nan] * (n - len(column)))
-            for key, arr in scheme.node_values(t).items():
-                self.node_extra.setdefault(key, []).append(np.asarray(arr))
-            if self.weights is None:
-                self.weights, self.points = scheme.node_weights(), scheme.contact_points()
-            for key, arr in scheme.point_values(t).items():
-                self.point_extra.setdefault(key, []).append(np.asarray(arr))
+            row = self._row(t, control)
+            sizes = self._sizes()
+            try:
+                self._append(t, row)
+            except BaseException:  # (KeyboardInterrupt between two appends: the records as they were)
+                self._truncate(sizes)
+                raise
             if self.every_step and len(self.times) > self.max_records:
                 self._decimate()
         if snapshot:
             self.snapshot(t)
+
+    def _row(self, t: float, control) -> dict:
+        """The values recorded at t, evaluated (nothing of the recorder's changed)."""
+        d, scheme = self.disc, self.observer
+        u = d.u.vec.FV().NumPy()
+        return dict(u_probe=d.fields.probe_values(), u_contact=u[d.node_dofs],
+                    beta=None if d.beta is None else d.beta.vec.FV().NumPy()[d.beta_dofs].copy(),
+                    extra=scheme.diagnostics() | (control or {}),
+                    nodes={key: np.asarray(arr) for key, arr in scheme.node_values(t).items()},
+                    weights=(scheme.node_weights(), scheme.contact_points()) if self.weights is None else None,
+                    points={key: np.asarray(arr) for key, arr in scheme.point_values(t).items()})
+
+    def _append(self, t: float, row: dict) -> None:
+        self.last = t
+        self.times.append(t)
+        self.steps.append(self.step)
+        self.u_probe.append(row["u_probe"])
+        self.u_contact.append(row["u_contact"])
+        if row["beta"] is not None:
+            self.beta.append(row["beta"])
+        n = len(self.times)
+        # (a run continued from an archive made with another solver, e.g. on another number of MPI processes,
+        # gives other diagnostics: cg_iterations. A column is NaN at the records that did not give it)
+        for key, val in row["extra"].items():
+            column = self.extra.setdefault(key, [])
+            column.extend([np.nan] * (n - 1 - len(column)))
+            column.append(val)
+        for column in self.extra.values():
+            column.extend([np.nan] * (n - len(column)))
+        for key, arr in row["nodes"].items():
+            self.node_extra.setdefault(key, []).append(arr)
+        if row["weights"] is not None:
+            self.weights, self.points = row["weights"]
+        for key, arr in row["points"].items():
+            self.point_extra.setdefault(key, []).append(arr)
+
+    def _sizes(self) -> dict:
+        """The length of every per-record list, and the last time (:meth:`_truncate` goes back to them)."""
+        lists = {"times": self.times, "steps": self.steps, "u_probe": self.u_probe, "u_contact": self.u_contact,
+                 "beta": self.beta} | {f"extra {k}": v for k, v in self.extra.items()} \
+            | {f"nodes {k}": v for k, v in self.node_extra.items()} | {f"points {k}": v for k, v in self.point_extra.items()}
+        return {"last": self.last, "lengths": {name: len(v) for name, v in lists.items()},
+                "extra": set(self.extra), "nodes": set(self.node_extra), "points": set(self.point_extra)}
+
+    def _truncate(self, sizes: dict) -> None:
+        self.last = sizes["last"]
+        for table, kept in ((self.extra, sizes["extra"]), (self.node_extra, sizes["nodes"]),
+                            (self.point_extra, sizes["points"])):
+            for key in set(table) - kept:
+                del table[key]
+        lengths = sizes["lengths"]
+        for name, seq in (("times", self.times), ("steps", self.steps), ("u_probe", self.u_probe),
+                          ("u_contact", self.u_contact), ("beta", self.beta)):
+            del seq[lengths[name]:]
+        for prefix, table in (("extra", self.extra), ("nodes", self.node_extra), ("points", self.point_extra)):
+            for key, seq in table.items():
+                del seq[lengths[f"{prefix} {key}"]:]
 
     def state(self) -> dict:
         """What the record schedule carries from step to step (the records themselves are the Dataset)."""

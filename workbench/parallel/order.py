@@ -263,6 +263,11 @@ class GatheringRecorder:
             self.recorder.take(t, *due, control=control)
 
     @property
+    def times(self) -> list:
+        """The recorded times (rank 0's; the others keep none)."""
+        return self.recorder.times if self.recorder is not None else []
+
+    @property
     def extra(self) -> dict:
         """The scalar records by name (rank 0's; the others keep none)."""
         return self.recorder.extra if self.recorder is not None else {}

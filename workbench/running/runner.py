@@ -427,8 +427,9 @@ class _Run:
                 if self.world.parallel and not (isinstance(err, Interrupted) and err.together):  # (a raw interrupt:
                     raise  # the ranks stopped in different places, nothing to gather; a signal's: stepping)
                 failure = err if isinstance(err, Interrupted) else Interrupted()
+                kept = self.recorder.times[-1] if self.recorder.times else self.steps.t  # (a record cut: taken back)
                 failure.args = (f"{sc.name}: {failure.args[0] if failure.args else 'interrupted'}; its steps to t = "
-                                f"{self.steps.t:.6g} s are kept",)
+                                f"{kept:.6g} s are kept",)
         ds = None  # (several MPI processes: rank 0 holds the records)
         if self.world.root:
             status = "complete" if failure is None else "incomplete"
