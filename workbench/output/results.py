@@ -252,8 +252,9 @@ class Recorder:
     def _sizes(self) -> dict:
         """The length of every per-record list, and the last time (:meth:`_truncate` goes back to them)."""
         lists = {"times": self.times, "steps": self.steps, "u_probe": self.u_probe, "u_contact": self.u_contact,
-                 "beta": self.beta} | {f"extra {k}": v for k, v in self.extra.items()} \
-            | {f"nodes {k}": v for k, v in self.node_extra.items()} | {f"points {k}": v for k, v in self.point_extra.items()}
+                 "beta": self.beta}
+        for prefix, table in (("extra", self.extra), ("nodes", self.node_extra), ("points", self.point_extra)):
+            lists |= {f"{prefix} {k}": v for k, v in table.items()}
         return {"last": self.last, "lengths": {name: len(v) for name, v in lists.items()},
                 "extra": set(self.extra), "nodes": set(self.node_extra), "points": set(self.point_extra)}
 
