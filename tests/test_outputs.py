@@ -209,3 +209,13 @@ def test_an_interrupt_inside_a_record_keeps_the_records_before(monkeypatch):
     assert ds is not None and ds.sizes["time"] == 9 and float(ds.time[-1]) == pytest.approx(0.08)
     assert ds.attrs["status"] == "incomplete" and all(ds[n].sizes["time"] == 9 for n in ds.data_vars
                                                       if "time" in ds[n].dims)
+
+
+def test_vtk_of_a_run_stopped_before_its_first_snapshot_keeps_the_exit_code(tmp_path):
+    """``--vtk`` on a run that diverged before its first snapshot ended in a traceback and exit 1, after the archive
+    was written (found by an outside pass): it says no VTK files were written, and the exit code is the run's (3)."""
+    p = subprocess.run([sys.executable, "-m", "workbench.cli", "run", "tp5", "--h", "0.1", "--k", "0.1", "--set",
+                        "allow_unstable=true", "--set", "snapshots=0.9", "--no-progress", "-o", str(tmp_path / "b.nc"),
+                        "--vtk", str(tmp_path / "vtk")], capture_output=True, text=True)
+    assert p.returncode == 3 and "Traceback" not in p.stderr, p.stderr
+    assert "no VTK files written" in p.stdout and (tmp_path / "b.nc").exists()

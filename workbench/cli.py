@@ -324,6 +324,8 @@ def _write_run(args, ds, code: int) -> int:
         def vtk_files(path):
             from .output import vtk
 
+            if "snapshot_time" not in ds.coords:  # (a run stopped before its first: a note, its own exit code kept)
+                return f"no VTK files written to {path}/: the run stopped before its first snapshot"
             return f"wrote {len(vtk.export(ds, path))} VTK files to {path}/ (open the .pvd in ParaView)"
 
         outputs.append(("--vtk", args.vtk, vtk_files))
