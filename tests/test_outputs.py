@@ -219,3 +219,21 @@ def test_vtk_of_a_run_stopped_before_its_first_snapshot_keeps_the_exit_code(tmp_
                         "--vtk", str(tmp_path / "vtk")], capture_output=True, text=True)
     assert p.returncode == 3 and "Traceback" not in p.stderr, p.stderr
     assert "no VTK files written" in p.stdout and (tmp_path / "b.nc").exists()
+
+
+def test_a_path_from_the_home_folder_is_the_home_folder(tmp_path, monkeypatch):
+    """``workbench.write(ds, "~/x.nc")`` made a folder named ``~``, failed, and left its full-size temporary in the home
+    folder, through xarray, which reads ``~`` as home (found by an outside pass); load refused the file. ``~`` is the
+    home folder now, for archives, figures and loads, and nothing is left beside the file."""
+    from workbench import plotting
+
+    monkeypatch.setenv("HOME", str(tmp_path / "home"))
+    monkeypatch.chdir(tmp_path)
+    (tmp_path / "home").mkdir()
+    ds = workbench.run("tp1", h=0.1, k=0.1, progress=False)
+    written = workbench.write(ds, "~/runs/x.nc")
+    assert written == tmp_path / "home" / "runs" / "x.nc" and written.is_file()
+    xr.testing.assert_identical(workbench.load("~/runs/x.nc"), ds)
+    plotting.overview(ds, "~/runs/x.png")
+    assert sorted(p.name for p in (tmp_path / "home" / "runs").iterdir()) == ["x.nc", "x.png"]
+    assert not (tmp_path / "~").exists()

@@ -87,8 +87,9 @@ def atomic_write(path, writer) -> Path:
 
     Never replaces what is not a regular file (a device, a pipe, a socket: the rename would put a file in its
     place) and raises OSError naming ``path`` for any failure, also a library's that is not an OSError (netCDF
-    reports a full disk as RuntimeError)."""
-    path = Path(path)
+    reports a full disk as RuntimeError). A leading ``~`` is the home folder, as xarray and matplotlib read it (taken
+    as a folder named ``~``, the temporary went to the home folder through xarray and was left there)."""
+    path = Path(path).expanduser()
     if path.exists() and not path.is_file() and not path.is_dir():
         raise OSError(errno.EEXIST, "it exists and is not a regular file (a device, a pipe or a socket): it is not "
                                     "replaced", str(path))
@@ -119,7 +120,7 @@ def check_output(path, option: str, *, folder: bool = False) -> Path:
     meant (or a file where a folder is meant), a parent that is a file, a folder without write permission."""
     if str(path).strip() == "":
         raise Unwritable(f"{option} '': give a {'folder' if folder else 'file'} name")
-    path = Path(path)
+    path = Path(path).expanduser()
     longest = max((len(part.encode()) for part in path.parts), default=0)
     if longest > 255:
         raise Unwritable(f"{option} {str(path)[:60]!r}...: a name in it is {longest} bytes long, more than the 255 "

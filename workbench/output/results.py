@@ -503,8 +503,10 @@ def load(path) -> xr.Dataset:
     """
     from ..errors import ParameterError
 
+    if isinstance(path, (str, os.PathLike)):
+        path = Path(path).expanduser()  # (~ as xarray reads it)
     if not isinstance(path, (str, os.PathLike)) or not Path(path).is_file():
-        raise ParameterError(f"workbench.load: {path!r} is not an archive file" +
+        raise ParameterError(f"workbench.load: {str(path)!r} is not an archive file" +
                              (" (no such file)" if isinstance(path, (str, os.PathLike)) else ""))
     try:
         with xr.open_dataset(path, engine="netcdf4", decode_times=False, decode_timedelta=False) as ds:

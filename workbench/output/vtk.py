@@ -58,7 +58,7 @@ def _stem(ds, stem):
 
 def export_file_names(ds, folder, stem=None) -> list[Path]:
     """The files :func:`export` writes for ``ds`` into ``folder``, in the order it returns them."""
-    folder, stem = Path(folder), _stem(ds, stem)
+    folder, stem = Path(folder).expanduser(), _stem(ds, stem)
     n = ds.sizes["snapshot"]
     out = [folder / f"{stem}_{i:04d}.vtu" for i in range(n)]
     out += [folder / f"{stem}_contact_{i:04d}.vtu" for i in range(n)]
@@ -204,7 +204,7 @@ def export(ds, folder, stem=None) -> list[Path]:
     """
     if "snapshot_time" not in ds.coords:
         raise ValueError("export: the result has no snapshots (u_nodes) to write")
-    folder, stem = Path(folder), _stem(ds, stem)
+    folder, stem = Path(folder).expanduser(), _stem(ds, stem)  # (~: home, as for archives)
     dim = _dim(ds)
     points, cells, cell_type, quadratic = _volume_grid(ds)
     facets, used, renumber, node_of_vertex = _contact_grid(ds)

@@ -292,7 +292,7 @@ def _archive_folder(archive) -> Path:
         if not isinstance(archive, (str, os.PathLike)):
             raise ParameterError(f"Study.run: archive = {archive!r}: give a folder for the case archives")
         check_output(archive, "Study.run: archive", folder=True)
-    archive = Path(archive) if archive is not None else Path(tempfile.mkdtemp(prefix="workbench-study-"))
+    archive = Path(archive).expanduser() if archive is not None else Path(tempfile.mkdtemp(prefix="workbench-study-"))
     archive.mkdir(parents=True, exist_ok=True)
     return archive
 
