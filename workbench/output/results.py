@@ -242,12 +242,17 @@ class Recorder:
             column.append(val)
         for column in self.extra.values():
             column.extend([np.nan] * (n - len(column)))
-        for key, arr in row["nodes"].items():
-            self.node_extra.setdefault(key, []).append(arr)
+        # (per node or point: NaN at the records that did not give it, as a continued archive of an older code that
+        # recorded no contact pressure; its columns were shorter than time's, and the continuation failed at its end)
+        for table, values in ((self.node_extra, row["nodes"]), (self.point_extra, row["points"])):
+            for key, arr in values.items():
+                column = table.setdefault(key, [])
+                column.extend([np.full(np.shape(arr), np.nan)] * (n - 1 - len(column)))
+                column.append(arr)
+            for column in table.values():
+                column.extend([np.full(np.shape(column[-1]), np.nan)] * (n - len(column)))
         if row["weights"] is not None:
             self.weights, self.points = row["weights"]
-        for key, arr in row["points"].items():
-            self.point_extra.setdefault(key, []).append(arr)
 
     def _sizes(self) -> dict:
         """The length of every per-record list, and the last time (:meth:`_truncate` goes back to them)."""
