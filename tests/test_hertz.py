@@ -237,15 +237,17 @@ def test_contact_functional_on_a_curved_side_is_its_energy_gradient():
 
 def test_a_study_refines_the_contact_zone():
     """A Study sweeps h_contact (a refinement axis; the finest is named as the reference) on the Hertz body: the fields of
-    non-nested meshes with curved sides are compared by interpolation (a fine vertex just outside a coarser faceted
-    side takes its nearest cell), and the displacement's energy-norm error falls (measured 8.7e-4, 4.4e-4)."""
+    non-nested meshes with curved sides are compared over the cells' overlaps (a fine point just outside a coarser
+    faceted side takes its nearest cell), and the displacement's energy-norm error falls (measured 1.30e-3, 1.09e-3;
+    the body beyond the zone keeps h = 0.1. Compared by interpolation, as before, 8.7e-4 and 4.4e-4: the
+    interpolation's own change of the coarse field, test_study.py)."""
     st = workbench.Study("memory_hertz", sweep={"h_contact": [0.01, 0.005, 0.0025]}, workers=0, n_compare=2,
                          reference="finest")
     ds = st.run(progress=False)
     assert ds.attrs["reference_case"].endswith("h_contact=0.0025")
     err = ds.error_V.sel(h_contact=[0.01, 0.005]).values.ravel()
-    assert np.isfinite(err).all() and err[1] < 0.7 * err[0]
-    assert ds.attrs["transfer"] == "interpolation (meshes not nested)"
+    assert np.isfinite(err).all() and err[1] < 0.9 * err[0]
+    assert ds.attrs["transfer"].startswith("cell overlaps (meshes not nested)")
 
 
 @pytest.mark.slow

@@ -126,13 +126,12 @@ def compare_runs(case_scene, ds, ref_scene, R, compare) -> dict:
     parts, sizes = [], []
     for t in compare:
         i_c, i_f = snapshot_index(cds, t), snapshot_index(fds, t)
-        du = fds.u_dofs.values[i_f] - tr.displacement(cds.u_dofs.values[i_c], cds.u_nodes.values[i_c])
-        dsig = fds.stress.values[i_f] - tr.cells(cds.stress.values[i_c])
         dbeta = beta = None
         if "beta" in ds:
             beta = fds.beta.sel(time=t, method="nearest").values
             dbeta = beta - tr.facets(cds.beta.sel(time=t, method="nearest").values)
-        parts.append(transfer.norms(fi, du, dsig, dbeta))
+        fields = [(d.u_dofs.values[i], d.u_nodes.values[i], d.stress.values[i]) for d, i in ((fds, i_f), (cds, i_c))]
+        parts.append(tr.difference_norms(*fields, dbeta))
         sizes.append(transfer.norms(fi, fds.u_dofs.values[i_f], fds.stress.values[i_f], beta))
     t_rec = ds.time.values
     ref_probe = R.u_probe.sel(time=t_rec, method="nearest").values
