@@ -158,7 +158,7 @@ class Transfer:
         same = coarse is fine
         self.identity = same
         self.P = None  # P1 on both: the vertex interpolation matrix (else NGSolve interpolates)
-        self.overlap = None  # P1 on both, not nested: the cells' overlaps the errors are summed over
+        self._overlap, self._vertex_cells = None, None  # (P1 on both, not nested: :meth:`difference_norms`' own)
         if same:
             return
         if coarse.order == 1 and fine.order == 1:
@@ -167,9 +167,10 @@ class Transfer:
             nf, nc = len(fine.xyz), len(coarse.xyz)
             rows = np.repeat(np.arange(nf), coarse.dim + 1)
             self.P = sp.csr_matrix((lam.ravel(), (rows, coarse.cells[cells].ravel())), shape=(nf, nc))
-            if not self.exact and coarse.dim > 1:
-                self.overlap = Overlap(coarse, fine, cells)
-                self.method = self.overlap.describe()
+            if not self.exact and coarse.dim > 1:  # (the overlaps made when errors are asked for, not to move fields)
+                self._vertex_cells = cells
+                self.method = Overlap.DESCRIPTION.format(samples=len(subcell_centroids(fine.dim,
+                                                                                       SUBCELL_LEVELS[fine.dim])))
         self.cell_map = coarse.locate(fine.centroids)
         if coarse.dim == 1:
             self.facet_map = np.zeros(len(fine.facet_xyz), dtype=np.int64)
@@ -216,9 +217,11 @@ class Transfer:
         (u_dofs, u_nodes, stress) of one snapshot: over the cells' overlaps where the meshes are not nested (module
         docs), else on the fine mesh with the coarse fields carried there."""
         (uf, nf, sf), (uc, nc, sc) = fine_fields, coarse_fields
-        if self.overlap is None:
+        if self._vertex_cells is None:
             return norms(self.fine, uf - self.displacement(uc, nc), sf - self.cells(sc), dbeta)
-        o = self.overlap
+        if self._overlap is None:
+            self._overlap = Overlap(self.coarse, self.fine, self._vertex_cells)
+        o = self._overlap
         V = o.norm(p1_cell_strains(self.fine, nf), p1_cell_strains(self.coarse, nc))
         return V, o.norm(sf, sc), norms(self.fine, None, None, dbeta)[2]
 
@@ -248,9 +251,8 @@ class Overlap:
         d = fine_values[self.fine_cell] - coarse_values[self.coarse_cell]
         return float(np.sqrt(np.sum(self.volume[:, None] * self.weights[None, :] * d ** 2)))
 
-    def describe(self) -> str:
-        return (f"cell overlaps (meshes not nested): exact where a fine cell lies in one coarse cell, sampled at "
-                f"{self.samples} points where it straddles several")
+    DESCRIPTION = ("cell overlaps (meshes not nested): exact where a fine cell lies in one coarse cell, sampled at "
+                   "{samples} points where it straddles several")
 
 
 #: Levels of equal halving of a straddling cell's edges (:func:`subcell_centroids`): 4^4 = 256 sub-triangles in 2D,
