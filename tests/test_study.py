@@ -767,3 +767,10 @@ def test_a_case_too_large_for_the_machine_is_refused_before_any_case_runs(tmp_pa
                                                        r"\(order 2\) gives about .* displacement dofs"):
         st.run(tmp_path, progress=False)
     assert not list(tmp_path.glob("*.nc"))
+
+
+def test_h_contact_zero_in_a_sweep_is_refused():
+    """h_contact = 0 stands for h / 10; in a sweep it was sorted as the finest value, so the coarsest mesh became the
+    reference and every order NaN (found by an outside pass). Refused, naming the value."""
+    with pytest.raises(workbench.ParameterError, match=r"0 stands for h / 10 and would be taken for the finest"):
+        Study("memory_hertz", h=0.1, sweep={"h_contact": [0.0, 0.005, 0.0025]}, workers=0)

@@ -105,6 +105,9 @@ class Study:
             raise ParameterError("checkpoint_every applies to a single run with an output file (workbench run -o); a "
                                  "study archives each case as it finishes")
         self.cases, self.axes = expand(self.scene, union, couple)
+        if 0.0 in self.axes.get("h_contact", []) and len(self.axes["h_contact"]) > 1:  # (0 sorted as the finest)
+            raise ParameterError(f"sweep h_contact = {self.axes['h_contact']}: 0 stands for h / 10 and would be taken "
+                                 "for the finest; give that size as a number")
         self.n_compare = positive_int("n_compare", n_compare)
         self.workers = positive_int("workers", workers, lower=0)
         self.client = client
