@@ -237,3 +237,15 @@ def test_a_path_from_the_home_folder_is_the_home_folder(tmp_path, monkeypatch):
     plotting.overview(ds, "~/runs/x.png")
     assert sorted(p.name for p in (tmp_path / "home" / "runs").iterdir()) == ["x.nc", "x.png"]
     assert not (tmp_path / "~").exists()
+
+
+def test_plotting_refuses_what_it_cannot_draw_by_name(tmp_path):
+    """An outside pass: overview of a Dataset that is neither a run's nor a study's raised AttributeError, and an empty
+    path an unclear OSError; both are a ParameterError naming what to give."""
+    from workbench import plotting
+
+    with pytest.raises(workbench.ParameterError, match="neither a run's nor a study's"):
+        plotting.overview(xr.Dataset({"a": ("x", [1.0, 2.0])}))
+    ds = workbench.run("tp1", h=0.1, k=0.1, progress=False)
+    with pytest.raises(workbench.ParameterError, match="path = '': give a file name"):
+        plotting.overview(ds, "")

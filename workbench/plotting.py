@@ -68,8 +68,11 @@ def file_format(path, option: str = "path") -> str:
 
 def _save(fig, path):
     if path is not None:
+        from .errors import ParameterError
         from .output.files import atomic_write
 
+        if not str(path).strip():
+            raise ParameterError("plotting: path = '': give a file name, or None for the figure alone")
         fmt = file_format(path)  # (the temporary file has no suffix: the format is given)
         atomic_write(path, lambda tmp: fig.savefig(tmp, format=fmt, dpi=150, bbox_inches="tight"))
     return fig
@@ -94,6 +97,9 @@ def _of_kind(ds, study: bool, where: str) -> None:
     if not isinstance(ds, xr.Dataset):
         raise ParameterError(f"plotting.{where}: give the xarray Dataset of a {'study' if study else 'run'}, "
                              f"got {type(ds).__name__}")
+    if not study and "observed_order" not in ds and "u_probe" not in ds:
+        raise ParameterError(f"plotting.{where}: the Dataset is neither a run's nor a study's (no u_probe); it draws "
+                             "a run's (workbench.run(...) or workbench.load of its archive)")
     if study != ("observed_order" in ds):
         kind, other = ("a study's", "a run's") if study else ("a run's", "a study's")
         raise ParameterError(f"plotting.{where}: the Dataset is {other}; it draws {kind} (workbench."

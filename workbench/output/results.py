@@ -421,8 +421,8 @@ def ugrid_mesh(name: str, dim: int, vertex_xyz: np.ndarray, cells: np.ndarray) -
     if shape:
         attrs["volume_shape_type"] = f"{name}_volume_shape"
         out[f"{name}_volume_shape"] = xr.Variable(f"{pre}cell", np.zeros(len(cells), np.int8), attrs={
-            "cf_role": "volume_shape_type", "long_name": "the shape of each cell", "flag_values": np.int8(0),
-            "flag_meanings": "tetrahedron"})
+            "cf_role": "volume_shape_type", "long_name": "the shape of each cell", "units": "1",
+            "flag_values": np.int8(0), "flag_meanings": "tetrahedron"})
     out[name] = xr.Variable((), np.int32(0), attrs=attrs)
     return out
 
