@@ -774,3 +774,10 @@ def test_h_contact_zero_in_a_sweep_is_refused():
     reference and every order NaN (found by an outside pass). Refused, naming the value."""
     with pytest.raises(workbench.ParameterError, match=r"0 stands for h / 10 and would be taken for the finest"):
         Study("memory_hertz", h=0.1, sweep={"h_contact": [0.0, 0.005, 0.0025]}, workers=0)
+
+
+def test_coupled_steps_have_plain_names():
+    """k = 0.2 h made k = 0.005000000000000001 at h = 0.025, in the case's file name (found by an outside pass)."""
+    st = Study("tp5", h=[0.05, 0.025, 0.0125], k_over_h=0.2, T=0.3, workers=0)
+    assert [c.key for c in st.cases] == ["h0.05_p1_explicit_k0.01", "h0.025_p1_explicit_k0.005",
+                                         "h0.0125_p1_explicit_k0.0025"]

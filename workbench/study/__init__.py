@@ -96,8 +96,8 @@ class Study:
             if isinstance(k_over_h, bool) or not isinstance(k_over_h, (int, float)) or not k_over_h > 0 \
                     or not np.isfinite(k_over_h):
                 raise ParameterError(f"k_over_h = {k_over_h!r} must be a number > 0")
-            c = float(k_over_h)
-            couple["k"] = lambda values: c * values["h"]
+            c = float(k_over_h)  # (to 12 digits: 0.2 x 0.025 is 0.005000000000000001, in every case's file name)
+            couple["k"] = lambda values: float(f"{c * values['h']:.12g}")
         self.coupled = tuple(couple)
         union = [dict(base, **g) for g in grids] if grids else [base]
         self.scene = _base_scene(scene, overrides, union[0], couple)
