@@ -7,6 +7,7 @@ whose initial gap is the coordinate function y (the fast path takes it from its 
 """
 import dataclasses
 import re
+import warnings
 
 import numpy as np
 import pytest
@@ -496,3 +497,15 @@ def test_tau_scales_the_elastic_tensor_given():
     A = workbench.scene("hertz", elastic_tensor=C)["viscous_tensor"]
     np.testing.assert_allclose(np.array(A, dtype=float), 0.05 * np.array(C), rtol=1e-12)
     assert np.abs(a.u_probe.values - b.u_probe.values).max() <= 1e-10 * np.abs(b.u_probe.values).max()
+
+
+def test_an_h_contact_coarser_than_h_is_said_to_do_nothing():
+    """h_contact above h meshes the zone at h (the mesh takes the smaller size: the same vertices for 0.1, 0.2, 0.4 at
+    h = 0.1), and a study of it ran without a word (found by an outside pass): it is warned about."""
+    counts = {hc: workbench.scene("hertz", h=0.1, h_contact=hc).model_of().geometry.vertex_count() for hc in (0.1, 0.2)}
+    assert counts[0.1] == counts[0.2]
+    with pytest.warns(RuntimeWarning, match=r"h_contact = 0.2 is coarser than h = 0.1, and the mesh takes the smaller"):
+        workbench.run("hertz", h=0.1, h_contact=0.2, T=0.1, k=0.05, progress=False)
+    with warnings.catch_warnings():
+        warnings.simplefilter("error", RuntimeWarning)
+        workbench.run("hertz", h=0.1, h_contact=0.05, T=0.1, k=0.05, progress=False)

@@ -158,6 +158,9 @@ def warnings_for(scene, model, used: dict | None = None) -> list:
         out.append(f"{scene.name}: P1 elements on a thin body (thickness / length = {g.aspect():.2g}) lock in bending, "
                    "so displacements come out too small (the block at h = 0.05: 50 %; the slab at h = 0.0125: 5 %); "
                    "order = 2 converges at the same cost")
+    if scene.values.get("h_contact") and scene["h_contact"] > scene["h"]:
+        out.append(f"{scene.name}: h_contact = {scene['h_contact']:g} is coarser than h = {scene['h']:g}, and the mesh "
+                   "takes the smaller: the contact zone is meshed at h (give h_contact below h to refine it)")
     return (out + _locking(scene, model, g) + _contact_zone(scene, g) + _held_apex(scene, g)
             + _quadrature_cost(scene, model) + _kernel_fit(scene, model) + _unused(scene) + _underived(scene) + _ignored_by_the_solver(scene, used or {}))
 
