@@ -644,8 +644,12 @@ def progress_bar(progress, **options):
     with its monitor thread) is not paid by runs that show none."""
     if not (sys.stderr.isatty() if progress is None else progress):
         return _NoBar()
-    from tqdm.auto import tqdm
+    import importlib.util
 
+    if importlib.util.find_spec("ipywidgets") is None:  # (tqdm.auto warned "IProgress not found" in every notebook
+        from tqdm.std import tqdm  # without ipywidgets, which is no dependency: the text bar it falls back to)
+    else:
+        from tqdm.auto import tqdm
     return tqdm(**options)
 
 
