@@ -1103,3 +1103,13 @@ def test_output_piped_into_head_ends_quietly():
                            text=True)
         assert "Traceback" not in p.stderr and "BrokenPipe" not in p.stderr, (reader, p.stderr)
         assert p.stdout.startswith("tp5") or reader == "true"
+
+
+def test_k_min_above_t_and_a_contact_solver_with_nothing_to_solve_are_named():
+    """Found by an outside pass: k_min = 2 with T = 0.05 was refused naming k ("k = 0.01 (the first step) must lie in
+    [2, 0.05]"), and contact_solver with neither contact nor adhesion ran without a word."""
+    with pytest.raises(workbench.ParameterError, match=r"k_min = 2 is larger than T = 0.05; allowed: 0 < k_min"):
+        workbench.run("slab", scheme="implicit", rtol=1e-3, k_min=2.0, T=0.05, k=0.01, progress=False)
+    with pytest.warns(RuntimeWarning, match=r"contact_solver = coupled has no effect without contact or adhesion"):
+        workbench.run("slab", contact=False, adhesion=False, contact_solver="coupled", scheme="implicit", T=0.02,
+                      k=0.01, h=0.1, progress=False)

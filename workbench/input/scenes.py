@@ -470,6 +470,9 @@ def _check_consistency(name, body, v, model="A"):
                                  f"({controlled}); the {v['scheme']} scheme's step is bounded by its stability limit "
                                  "k_crit")
         k_max = v["k_max"] or v["T"]
+        if v["k_min"] > min(k_max, v["T"]):  # (named as itself: the message named k, the first step)
+            raise ParameterError(f"k_min = {v['k_min']:g} is larger than {'T' if k_max >= v['T'] else 'k_max'} = "
+                                 f"{min(k_max, v['T']):g}; allowed: 0 < k_min <= k_max <= T")
         if not v["k_min"] <= v["k"] <= k_max:
             raise ParameterError(f"k = {v['k']:g} (the first step) must lie in [k_min, k_max] = [{v['k_min']:g}, "
                                  f"{k_max:g}]")

@@ -206,7 +206,9 @@ _ONLY_WITH = ((CONTROL[1:], lambda v: is_adaptive(v["rtol"]), "rtol > 0 (error-c
               (("gamma_nu", "eps_a", "L", "beta0", "c_tau", "bonding_truncation"), lambda v: v.get("adhesion", False),
                "adhesion = true"),
               (tuple(n for n in ADAPT if n not in ("space_tol", "edge_tol")),  # (edge_tol: refused alone)
-               lambda v: v.get("space_tol", 0.0) > 0, "space_tol > 0 (adaptive meshes)"))
+               lambda v: v.get("space_tol", 0.0) > 0, "space_tol > 0 (adaptive meshes)"),
+              (("contact_solver", "contact_tol"), lambda v: v.get("contact", True) or v.get("adhesion", False),
+               "contact or adhesion (nothing acts on the contact side)"))
 
 
 def _unused(scene) -> list:
