@@ -350,3 +350,10 @@ def test_a_long_quadrature_memory_says_its_cost_before_the_run():
     (message,) = [w for w in preflight.warnings_for(sc, sc.model_of()) if "quadrature" in w]
     assert "1e+05 steps" in message and "exponentials" in message
     assert not [w for w in preflight.warnings_for(sc.with_(T=10), sc.model_of()) if "quadrature" in w]
+
+
+@pytest.mark.parametrize("text", ["-0.6" + "/1" * 1300, "-" * 1300 + "0.6", "2" + "**1" * 1300])
+def test_a_long_chain_of_divisions_or_signs_is_refused_in_one_line(capsys, text):
+    """Found by an outside pass: 1300 divisions (or unary minuses, or powers), under the 4000 characters allowed,
+    recursed past Python's limit while the expression was checked: a RecursionError traceback, exit 1."""
+    _one_error(*_cli(capsys, "run", "tp1", "--set", f"delta={text}", "--no-progress"), "nested too deeply")

@@ -372,9 +372,13 @@ def _parse_source(source, name, allowed) -> Expression:
     terms = tuple(tree.elts) if isinstance(tree, ast.Tuple) else (tree,)
     if not terms:
         raise ExpressionError(f"in {name} = {_shown(source)}: empty tuple")
-    terms = tuple(_balanced(term) for term in terms)
-    for term in terms:
-        _check(term, source, name, allowed)
+    try:  # (a chain of 1300 divisions or unary minuses recursed past Python's limit here: a traceback)
+        terms = tuple(_balanced(term) for term in terms)
+        for term in terms:
+            _check(term, source, name, allowed)
+    except RecursionError:
+        raise ExpressionError(f"in {name} = {_shown(source)}: nested too deeply (at most {MAX_DEPTH} "
+                              "levels)") from None
     used = frozenset(n.id for term in terms for n in ast.walk(term)
                      if isinstance(n, ast.Name) and n.id in VARIABLES)
     return Expression(source, terms, used)
