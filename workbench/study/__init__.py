@@ -16,6 +16,7 @@ Examples
 from __future__ import annotations
 
 import os
+import shutil
 import tempfile
 import time
 import warnings
@@ -169,12 +170,21 @@ class Study:
         equals that of a sweep run straight to the new T to round-off (the steps up
         to the old T were placed on that T's grid). Keep the old comparison times by
         taking a multiple of the old T (they are n_compare equal parts of [0, T]).
-        ``extend=False`` recomputes such cases from t = 0.
+        ``extend=False`` recomputes such cases from t = 0. Without ``archive`` the cases are kept in a temporary
+        folder while the study runs, removed after.
         """
+        temporary = archive is None  # (a cache no one can name: removed with the study's result made, as it was
+        archive = _archive_folder(archive)  # left in /tmp on every call, 1.4 GB of them found by an outside pass)
+        try:
+            return self._run_in(archive, progress, extend)
+        finally:
+            if temporary:
+                shutil.rmtree(archive, ignore_errors=True)
+
+    def _run_in(self, archive: Path, progress, extend: bool) -> xr.Dataset:
         from ..schemes.stepping import progress_bar
 
         record, compare = times.common(self)
-        archive = _archive_folder(archive)
         todo = list(dict.fromkeys(self.listed + (self.reference.cases() if self.reference else [])))
         runs, missing, expected, plans = self._archived(todo, archive, record, compare, extend)
         _fits(self.scene_of(c) for c in missing)
