@@ -7,6 +7,7 @@ argument; nothing a run computed may be lost when an output fails. The whole set
 """
 import os
 import stat
+from pathlib import Path
 
 import numpy as np
 import pytest
@@ -357,3 +358,19 @@ def test_a_long_chain_of_divisions_or_signs_is_refused_in_one_line(capsys, text)
     """Found by an outside pass: 1300 divisions (or unary minuses, or powers), under the 4000 characters allowed,
     recursed past Python's limit while the expression was checked: a RecursionError traceback, exit 1."""
     _one_error(*_cli(capsys, "run", "tp1", "--set", f"delta={text}", "--no-progress"), "nested too deeply")
+
+
+def test_an_output_naming_the_runs_own_input_is_refused(capsys, tmp_path, monkeypatch):
+    """Found by an outside pass: ``workbench run rocker.toml -o rocker.msh`` replaced the mesh with the archive, and
+    ``-o rocker.toml`` the scene file, silently (exit 0). Refused before any work; both files are left as they were."""
+    import shutil
+
+    for name in ("rocker.toml", "rocker.msh"):
+        shutil.copy(Path(__file__).resolve().parents[1] / "docs" / "examples" / name, tmp_path / name)
+    monkeypatch.chdir(tmp_path)
+    before = {name: (tmp_path / name).read_bytes() for name in ("rocker.toml", "rocker.msh")}
+    _one_error(*_cli(capsys, "run", "rocker.toml", "--T", "0.1", "-o", "rocker.msh", "--no-progress"),
+               "-o 'rocker.msh' is the run's own mesh file")
+    _one_error(*_cli(capsys, "run", "rocker.toml", "--T", "0.1", "-o", "./rocker.toml", "--no-progress"),
+               "is the run's own scene file")
+    assert {name: (tmp_path / name).read_bytes() for name in before} == before

@@ -273,7 +273,7 @@ def cmd_run(args) -> int:
     if args.restart is None:  # the values checked first, before NGSolve and xarray load (0.2 s, not 0.9 s, a mistake)
         from .input.scenes import scene
 
-        scene(args.scene, **overrides)
+        _not_an_input(args, scene(args.scene, **overrides))
     from .running.runner import run
 
     try:
@@ -296,6 +296,24 @@ def cmd_run(args) -> int:
     if ds is None:  # (several MPI processes: rank 0 holds the result and writes it)
         return code
     return _write_run(args, ds, code)
+
+
+def _not_an_input(args, sc) -> None:
+    """Refuse an output that names the run's own scene file or mesh file: ``-o rocker.msh`` replaced the mesh with
+    the archive, without a word (found by an outside pass)."""
+    from pathlib import Path
+
+    inputs = {}
+    if str(args.scene).endswith(".toml"):
+        inputs[Path(args.scene).expanduser().resolve()] = "scene file"
+    if isinstance(sc.values.get("mesh"), str):
+        inputs[Path(sc.values["mesh"]).expanduser().resolve()] = "mesh file"
+    for option in ("output", "plot"):
+        value = getattr(args, option, None)
+        if value is not None and Path(value).expanduser().resolve() in inputs:
+            raise ParameterError(f"{'-o' if option == 'output' else '--plot'} {value!r} is the run's own "
+                                 f"{inputs[Path(value).expanduser().resolve()]}, which it would replace; give "
+                                 "another name")
 
 
 def _write_run(args, ds, code: int) -> int:
