@@ -1113,3 +1113,16 @@ def test_k_min_above_t_and_a_contact_solver_with_nothing_to_solve_are_named():
     with pytest.warns(RuntimeWarning, match=r"contact_solver = coupled has no effect without contact or adhesion"):
         workbench.run("slab", contact=False, adhesion=False, contact_solver="coupled", scheme="implicit", T=0.02,
                       k=0.01, h=0.1, progress=False)
+
+
+def test_more_threads_than_four_a_core_are_refused_before_any_work():
+    """--threads 256 was in the allowed range (1 to 256) and ended after the setup in NGSolve's "Could not allocate
+    localheap" traceback on a 2-core machine with 23 GB (each thread reserves its own working memory; found by an
+    outside pass). The range is 1 to four per core, on the command line and in Python."""
+    cores = os.cpu_count() or 1
+    p = subprocess.run([sys.executable, "-m", "workbench.cli", "run", "tp1", "--threads", str(4 * cores + 1),
+                        "--no-progress"], capture_output=True, text=True)
+    assert p.returncode == 2 and "Traceback" not in p.stderr and f"from 1 to {4 * cores}" in p.stderr, p.stderr
+    with pytest.raises(workbench.ParameterError, match=f"threads = {4 * cores + 1}: give an integer from 1 to"):
+        workbench.run("tp1", threads=4 * cores + 1, progress=False)
+    workbench.run("tp1", h=0.1, k=0.1, threads=2, progress=False)

@@ -146,10 +146,9 @@ def _check_backend() -> None:
 
 
 def _threads(value):
-    if value is not None and not 1 <= value <= 256:
-        raise ParameterError(f"--threads {value}: give an integer from 1 to 256 (NGSolve TaskManager threads; this "
-                             f"machine has {os.cpu_count()} cores)")
-    return value
+    from .values import check_threads
+
+    return check_threads(value, "--threads")
 
 
 def _write_or_keep(ds, path=None):

@@ -248,3 +248,18 @@ def to_plain(value):
     if isinstance(value, tuple):
         return [to_plain(v) for v in value]
     return value
+
+
+def check_threads(value, name: str):
+    """``value`` (None: the default) as a thread count, or a ParameterError naming ``name`` and the range: 1 to four
+    per core. More only wait, and each of NGSolve's threads reserves its own working memory: 256 on a 2-core
+    machine with 23 GB ended in "Could not allocate localheap", a traceback after the setup (found by an outside
+    pass)."""
+    import os
+
+    cores = os.cpu_count() or 1
+    if value is not None and (isinstance(value, bool) or not isinstance(value, numbers.Integral)
+                              or not 1 <= value <= 4 * cores):
+        raise ParameterError(f"{name} {value!r}: give an integer from 1 to {4 * cores} (NGSolve TaskManager threads, "
+                             f"at most four per core; this machine has {cores})")
+    return value

@@ -14,7 +14,6 @@ import dataclasses
 import functools
 import inspect
 import json
-import os
 import warnings
 from pathlib import PurePath
 
@@ -29,7 +28,7 @@ from ..input.geometry import of_run
 from ..output import results
 from ..schemes import scheme_class
 from ..schemes.stepping import AdaptiveSteps, FixedSteps, march, time_grid
-from ..values import closest_name
+from ..values import check_threads, closest_name
 from . import adapt, follow, preflight
 from . import restart as restarts
 from .threads import blas_single_threaded, task_manager
@@ -166,9 +165,7 @@ def _check_options(overrides: dict, checkpoint, limit, threads, progress=None) -
         raise ParameterError(f"progress = {progress!r}: give True or False (default: a bar only on a terminal)")
     if limit is not None and (isinstance(limit, bool) or not isinstance(limit, (int, float)) or not limit > 0):
         raise ParameterError(f"limit = {limit!r}: give the displacement bound in m, a number > 0")
-    if threads is not None and (isinstance(threads, bool) or not isinstance(threads, int) or not 1 <= threads <= 256):
-        raise ParameterError(f"threads = {threads!r}: give an integer from 1 to 256 (NGSolve TaskManager threads; this "
-                             f"machine has {os.cpu_count()} cores)")
+    check_threads(threads, "threads =")
 
 
 def _grid(sc, numerics, times, record_times, resume):
