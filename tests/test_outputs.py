@@ -249,3 +249,35 @@ def test_plotting_refuses_what_it_cannot_draw_by_name(tmp_path):
     ds = workbench.run("tp1", h=0.1, k=0.1, progress=False)
     with pytest.raises(workbench.ParameterError, match="path = '': give a file name"):
         plotting.overview(ds, "")
+
+
+@pytest.mark.slow
+@pytest.mark.parametrize("gap", [0.0, 0.01, 0.05])
+def test_a_second_ctrl_c_does_not_lose_the_archive(tmp_path, gap):
+    """Found by an outside pass: a second Ctrl-C while the interrupted run's records became a Dataset or its archive
+    was written lost the archive ("its steps are kept" said first), hung the process on netCDF's lock, or ended it by
+    the signal after the archive was written (exit -2). The first stops the run; the later ones are ignored. (A
+    Ctrl-C inside a checkpoint's write, which took netCDF's lock for good, waits for the write's end.)"""
+    import os
+    import signal
+    import time
+
+    out = tmp_path / "x.nc"
+    p = subprocess.Popen([sys.executable, "-m", "workbench.cli", "run", "slab", "--T", "20", "--no-progress", "--set",
+                          "traction_top=(0, sin(t))", "--set", "checkpoint_every=5", "-o", str(out)],
+                         stdout=subprocess.PIPE, stderr=subprocess.PIPE, text=True)
+    try:
+        for _ in range(600):  # (the loop runs once its first checkpoint is there)
+            if out.exists() or p.poll() is not None:
+                break
+            time.sleep(0.1)
+        os.kill(p.pid, signal.SIGINT)
+        time.sleep(gap)
+        os.kill(p.pid, signal.SIGINT)
+        _, err = p.communicate(timeout=300)
+    finally:
+        p.kill()
+    assert p.returncode == 130 and "Traceback" not in err, (p.returncode, err)
+    ds = workbench.load(tmp_path / "x.stopped.nc")  # (beside the checkpoint, which keeps the state to go on from)
+    assert ds.attrs["status"] == "incomplete" and ds.sizes["time"] > 1
+    assert workbench.load(out).attrs["status"] == "checkpoint"

@@ -275,6 +275,7 @@ def cmd_run(args) -> int:
         _not_an_input(args, scene(args.scene, **overrides))
     from .running.runner import run
 
+    _first_signal_stops()
     try:
         # -o is also where checkpoints go (checkpoint_every): a killed run goes on with the same command + --restart
         ds = run(args.scene, restart=args.restart, checkpoint=args.output,
@@ -317,7 +318,46 @@ def _not_an_input(args, sc) -> None:
 
 def _write_run(args, ds, code: int) -> int:
     """The status line, ``-o``'s archive, then ``--plot`` and ``--vtk`` (a stopped run's too: ``code`` says why it
-    stopped, 0 where it did not); the exit code."""
+    stopped, 0 where it did not); the exit code. Ctrl-C and SIGTERM are ignored from here (:func:`_stop_listening`)."""
+    _stop_listening()
+    return _write_outputs(args, ds, code)
+
+
+def _first_signal_stops() -> None:
+    """One process: the first Ctrl-C or SIGTERM stops the run (KeyboardInterrupt, Interrupted), and the ones after
+    it are ignored while the steps it kept are written. A second Ctrl-C 10 ms after the first, while the records became
+    a Dataset, lost the archive (found by an outside pass). Several MPI processes keep their stop requests."""
+    import signal
+    import threading
+
+    from .discrete.world import launched
+
+    if launched() > 1 or threading.current_thread() is not threading.main_thread():
+        return
+
+    def stop(signum, frame):
+        _stop_listening()
+        if signum == signal.SIGTERM:
+            raise Interrupted("terminated (SIGTERM)", signal=signum)
+        raise KeyboardInterrupt
+
+    for s in (signal.SIGINT, signal.SIGTERM):
+        signal.signal(s, stop)
+
+
+def _stop_listening() -> None:
+    """SIGINT and SIGTERM ignored from now on, in the main thread: the run has stopped, and what is left is to keep
+    what it computed. A second Ctrl-C while an interrupted run's archive was written lost it, or hung the process on
+    netCDF's lock; one just after it ended the process by the signal, exit -2 (found by an outside pass)."""
+    import signal
+    import threading
+
+    if threading.current_thread() is threading.main_thread():
+        for s in (signal.SIGINT, signal.SIGTERM):
+            signal.signal(s, signal.SIG_IGN)
+
+
+def _write_outputs(args, ds, code: int) -> int:
     print(_status_line(ds))
     kept = None
     if args.output:

@@ -16,6 +16,7 @@ Examples
 """
 from __future__ import annotations
 
+import contextlib
 import os
 
 #: The environment variables through which MPI launchers (MPICH's hydra and Intel MPI, Open MPI, MVAPICH) tell a
@@ -84,3 +85,28 @@ def request_stop(signum: int) -> None:
 def stop_requested() -> int:
     """The signal a stop was asked for with (:func:`request_stop`), 0 for none."""
     return _STOP[0]
+
+
+@contextlib.contextmanager
+def signals_held(drop: bool = False):
+    """SIGINT and SIGTERM held inside (the main thread's): delivered when the block ends, or dropped (``drop``: the
+    run has stopped already, and what it computed is being kept). A Ctrl-C inside a netCDF write (a checkpoint)
+    left xarray's lock taken, and the final archive's write hung on it; a second Ctrl-C while an interrupted run's
+    records became a Dataset lost them (found by an outside pass)."""
+    import signal
+    import threading
+
+    if threading.current_thread() is not threading.main_thread():
+        yield
+        return
+    came = []
+    held = {s: signal.getsignal(s) for s in (signal.SIGINT, signal.SIGTERM)}
+    for s in held:
+        signal.signal(s, signal.SIG_IGN if drop else (lambda signum, frame: came.append(signum)))
+    try:
+        yield
+    finally:
+        for s, handler in held.items():
+            signal.signal(s, handler if handler is not None else signal.SIG_DFL)
+        for signum in came[:1]:
+            signal.raise_signal(signum)

@@ -20,6 +20,7 @@ from pathlib import PurePath
 import numpy as np
 
 from .. import parallel
+from ..discrete.world import signals_held
 from ..errors import Diverged, Interrupted, ParameterError
 from ..expressions import Expression
 from ..input import numerics as numerics_of
@@ -431,7 +432,8 @@ class _Run:
         if self.world.root:
             status = "complete" if failure is None else "incomplete"
             try:
-                ds = self.recorder.dataset(self.attrs(status, failure, self.clock.wall, self.clock.cpu))
+                with signals_held(drop=True) if isinstance(failure, Interrupted) else contextlib.nullcontext():
+                    ds = self.recorder.dataset(self.attrs(status, failure, self.clock.wall, self.clock.cpu))
             except Exception:  # (an interrupt inside a record: its variables are not all taken, nothing to keep)
                 if not isinstance(failure, Interrupted):
                     raise
@@ -523,8 +525,9 @@ class _Run:
             state = restarts.capture(self.scheme, self.steps, self.recorder)  # (every rank; rank 0 writes)
             if not self.world.root:
                 return
-            self._write(restarts.attach(self.recorder.dataset(self.attrs("checkpoint", None, *self.clock.elapsed())),
-                                        state), t)
+            with signals_held():  # (a Ctrl-C inside netCDF's write left its lock taken: delivered after the write)
+                self._write(restarts.attach(self.recorder.dataset(self.attrs("checkpoint", None,
+                                                                             *self.clock.elapsed())), state), t)
 
         return after_step
 
