@@ -374,3 +374,12 @@ def test_an_output_naming_the_runs_own_input_is_refused(capsys, tmp_path, monkey
     _one_error(*_cli(capsys, "run", "rocker.toml", "--T", "0.1", "-o", "./rocker.toml", "--no-progress"),
                "is the run's own scene file")
     assert {name: (tmp_path / name).read_bytes() for name in before} == before
+
+
+def test_reproduce_all_checks_every_problem_before_running_any(capsys, tmp_path):
+    """``reproduce all --set a=2`` ran and wrote tp1-tp3 before tp4 refused the rods' parameter (found by an outside
+    pass): every problem's values are checked first."""
+    out = tmp_path / "rep"
+    _one_error(*_cli(capsys, "reproduce", "all", "--set", "a=2", "--no-side", "--out", str(out)),
+               "tp4: unknown parameter 'a'")
+    assert not out.exists() or not any(out.iterdir())

@@ -540,6 +540,11 @@ def cmd_reproduce(args) -> int:
     check_output(args.out, "--out", folder=True)
     overrides = _overrides(args, swept=("h", "k"))
     problems = reproduction.PROBLEMS if args.problem == "all" else (args.problem,)
+    for problem in problems:  # (every problem's values checked first: tp1-tp3 were written before tp4 refused one)
+        try:
+            reproduction.problem_scene(problem, args.h, args.k, **overrides)
+        except ParameterError as err:
+            raise ParameterError(f"{problem}: {err}") from None
     code = 0
     for problem in problems:
         t0 = time.perf_counter()
