@@ -40,6 +40,11 @@ class ExplicitEuler(KelvinVoigtScheme):
         "cg_v_old": ("m/s", "restart state: the velocity of the step before (solver = 'cg': the first guess)"),
         "step_limit_normal": ("Pa/m", "restart state: the largest normal spring met at each contact point"),
         "step_limit_tangent": ("Pa/m", "restart state: the largest tangential spring met at each contact point"),
+        # (numbers of several units in one variable: said by name, as the study's error is; they had none)
+        "step_limit": ("mixed (the estimate's indicator, its update count, lambda_max in 1/s)",
+                       "restart state: the stability estimate's own numbers"),
+        "step_checks": ("mixed (k_crit_min in s, its update count, the override flag)",
+                        "restart state: the step checks so far"),
     }
 
     def __init__(self, disc):
