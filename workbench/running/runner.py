@@ -428,20 +428,24 @@ class _Run:
                 kept = self.recorder.times[-1] if self.recorder.times else self.steps.t  # (a record cut: taken back)
                 failure.args = (f"{sc.name}: {failure.args[0] if failure.args else 'interrupted'}; its steps to t = "
                                 f"{kept:.6g} s are kept",)
-        ds = None  # (several MPI processes: rank 0 holds the records)
-        if self.world.root:
-            status = "complete" if failure is None else "incomplete"
-            try:
-                with signals_held(drop=True) if isinstance(failure, Interrupted) else contextlib.nullcontext():
-                    ds = self.recorder.dataset(self.attrs(status, failure, self.clock.wall, self.clock.cpu))
-            except Exception:  # (an interrupt inside a record: its variables are not all taken, nothing to keep)
-                if not isinstance(failure, Interrupted):
-                    raise
+        ds = self._records(failure) if self.world.root else None  # (several MPI processes: rank 0 holds them)
         if failure is not None:
             failure.dataset = ds
             raise failure
         state = restarts.capture(scheme, self.steps, self.recorder)  # (several MPI processes: every rank)
         return restarts.attach(ds, state) if self.world.root else None
+
+    def _records(self, failure):
+        """The records' Dataset, after the loop ended as ``failure`` says (None: complete); None where an interrupt
+        left nothing to keep. Further Ctrl-Cs are dropped while it is made (a second one lost the run)."""
+        status = "complete" if failure is None else "incomplete"
+        try:
+            with signals_held(drop=True) if isinstance(failure, Interrupted) else contextlib.nullcontext():
+                return self.recorder.dataset(self.attrs(status, failure, self.clock.wall, self.clock.cpu))
+        except Exception:
+            if not isinstance(failure, Interrupted):
+                raise
+            return None
 
     def attrs(self, status, failure=None, wall=0.0, cpu=0.0) -> dict:
         """The Dataset's attributes: provenance, the discretisation, cost, outcome (and both parts of a restart)."""
