@@ -39,7 +39,7 @@ import scipy.sparse as sp
 from ..input.geometry import of_run
 from ..physics import kelvin_voigt
 from .discretisation import bonding_space
-from .fields import mesh_cells
+from .fields import mesh_cells, p1_gradients, p1_strains
 
 
 class MeshInfo:
@@ -242,7 +242,6 @@ class Overlap:
         self.fine_cell = np.concatenate([np.flatnonzero(whole), np.repeat(cut, len(lam))])
         self.coarse_cell = np.concatenate([at[whole, 0], coarse.locate(points) if len(points) else []]).astype(int)
         self.volume = np.concatenate([volume[whole], np.repeat(volume[cut] / len(lam), len(lam))])
-        self.cut, self.cells, self.samples = len(cut), len(fine.cells), len(lam)
         self.weights = STRESS_WEIGHTS[fine.dim]
 
     def norm(self, fine_values: np.ndarray, coarse_values: np.ndarray) -> float:
@@ -292,12 +291,8 @@ def _red(s: np.ndarray, dim: int) -> list:
 def p1_cell_strains(info: MeshInfo, u_nodes: np.ndarray) -> np.ndarray:
     """The strain of the P1 field with vertex values ``u_nodes`` (vertex, component), per cell (cell, component in
     Voigt order: :data:`workbench.physics.kelvin_voigt.COMPONENTS`)."""
-    X = info.xyz[info.cells]
-    inverse = np.linalg.inv(X[:, 1:, :] - X[:, :1, :])  # (cell, b, i): d lambda_i / d x_b, i = 1..d
-    G = np.concatenate([-inverse.sum(axis=2, keepdims=True), inverse], axis=2)  # (cell, b, vertex k)
-    U = np.asarray(u_nodes, dtype=float).reshape(len(info.xyz), info.dim)[info.cells]  # (cell, k, a)
-    grad = np.einsum("cka,cbk->cab", U, G)
-    return np.stack([0.5 * (grad[:, i, j] + grad[:, j, i]) for i, j in kelvin_voigt.COMPONENTS[info.dim]], axis=1)
+    U = np.asarray(u_nodes, dtype=float).reshape(len(info.xyz), info.dim).T
+    return p1_strains(U, info.cells, p1_gradients(info.xyz[info.cells]))
 
 
 STRESS_WEIGHTS = {1: np.array([1.0]), 2: np.array([1.0, 1.0, 2.0]), 3: np.array([1.0, 1.0, 1.0, 2.0, 2.0, 2.0])}
