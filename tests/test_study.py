@@ -86,6 +86,68 @@ def test_errors_on_meshes_that_are_not_nested_are_those_of_the_fields():
     assert abs(interpolated - monte_carlo) > 0.1 * monte_carlo  # (the old way's error, which the test can see)
 
 
+def _beta_error(tr, beta_fine, beta_coarse):
+    """|beta_fine - beta_coarse|_L2(Gamma3) as a Study takes it (the other fields zero)."""
+    def zero(info):
+        components = 3 * info.dim - 3
+        return np.zeros(info.fes.ndof), np.zeros((len(info.xyz), info.dim)), np.zeros((len(info.cells), components))
+
+    return tr.difference_norms(zero(tr.fine), zero(tr.coarse), (beta_fine, beta_coarse))[2]
+
+
+def _facet_front(info, front):
+    """beta = 1 on the contact facets whose midpoint lies within ``front`` of the axis, 0 beyond (a debonding front)."""
+    return (np.linalg.norm(info.facet_xyz[:, :-1], axis=1) < front).astype(float)
+
+
+def test_beta_on_meshes_that_are_not_nested_is_differenced_over_the_facets_overlaps():
+    """Found on reading the cells' fix: on meshes that are not nested the bonding field was compared at the fine
+    facets' midpoints, each fine facet taking one coarse facet's beta, so a coarse jump of beta moved by up to a fine
+    facet. With a debonding front in each field (beta = 1 within 0.0737 of the axis on the 2D Hertz body at
+    h_contact = 0.02 and 0.014) that gave 0 for a difference of 0.064. The norm is now a sum over the facets'
+    overlaps. In 2D the contact side is a graph over x, so the tester's way is exact: both meshes' facets cut at every
+    vertex's x, each piece weighed by its share of its fine facet's length; in 3D (the hemisphere at h_contact = 0.04
+    and 0.03), a Monte Carlo integral over the fine facets, each point given the coarse facet below it."""
+    def info(scene, h_contact):
+        return transfer.MeshInfo(workbench.scene(scene, h_contact=h_contact).model_of().geometry, 1)
+
+    coarse, fine = info("hertz", 0.02), info("hertz", 0.014)
+    tr = transfer.Transfer(coarse, fine)
+    xf, xc = (np.sort(i.facet_vertices()[..., 0], axis=1) for i in (fine, coarse))
+    cuts = np.unique(np.concatenate([xf.ravel(), xc.ravel()]))
+    middle = 0.5 * (cuts[1:] + cuts[:-1])
+    jf, jc = (np.searchsorted(x[:, 0], middle, side="right") - 1 for x in (xf, xc))  # (the facets are intervals)
+    assert np.all(middle <= xf[jf, 1]) and np.all(middle <= xc[jc, 1])
+    length = np.linalg.norm(np.diff(fine.facet_vertices(), axis=1)[:, 0], axis=1)
+    weight = length[jf] * np.diff(cuts) / (xf[jf, 1] - xf[jf, 0])
+    for front in (0.031, 0.05, 0.0737, 0.1):
+        bf, bc = _facet_front(fine, front), _facet_front(coarse, front)
+        exact = np.sqrt(np.sum(weight * (bf[jf] - bc[jc]) ** 2))
+        assert _beta_error(tr, bf, bc) == pytest.approx(exact, rel=0.015), front
+    midpoints = np.sqrt(np.sum(fine.facet_measure * (bf - tr.facets(bc)) ** 2))
+    assert abs(midpoints - exact) > 0.1 * exact  # (the old way, at the last front)
+
+    coarse, fine = info("hertz3d", 0.04), info("hertz3d", 0.03)
+    tr = transfer.Transfer(coarse, fine)
+    bf, bc = _facet_front(fine, 0.06), _facet_front(coarse, 0.06)
+    rng = np.random.default_rng(1)
+    V, C = fine.facet_vertices(), coarse.facet_vertices()
+    r = rng.random((len(V), 400, 2))
+    r[r.sum(axis=2) > 1] = 1.0 - r[r.sum(axis=2) > 1]  # (uniform on each triangle)
+    edges = V[:, None, 1:] - V[:, None, :1]  # (facet, 1, edge, coordinate)
+    points = (V[:, None, 0] + r[..., :1] * edges[:, :, 0] + r[..., 1:] * edges[:, :, 1]).reshape(-1, 3)[:, :2]
+    below = np.full(len(points), -1)
+    for j, tri in enumerate(C[:, :, :2]):  # (the coarse facet below each point: barycentric in the plane z = 0)
+        lam = np.linalg.solve(np.stack([tri[1] - tri[0], tri[2] - tri[0]], axis=1), (points - tri[0]).T).T
+        below[(below < 0) & (lam >= 0).all(axis=1) & (lam.sum(axis=1) <= 1)] = j
+    found = below >= 0
+    assert found.mean() > 0.99
+    d2 = (np.repeat(bf, 400) - bc[below]) ** 2 * np.repeat(fine.facet_measure / 400, 400)
+    monte_carlo = np.sqrt(d2[found].sum() / found.mean())
+    assert _beta_error(tr, bf, bc) == pytest.approx(monte_carlo, rel=0.03)
+    assert np.sqrt(np.sum(fine.facet_measure * (bf - tr.facets(bc)) ** 2)) < 0.92 * monte_carlo  # (the old way)
+
+
 @pytest.mark.slow
 def test_slab_coupled_sweep():
     """2D slab (tp5 load), coupled k = 0.2 h (explicit, k < k_crit), against the finest case.

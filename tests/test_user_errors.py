@@ -478,6 +478,21 @@ def test_a_run_stopped_by_a_signal_writes_the_steps_it_took(tmp_path, signum, co
     assert float(ds.time[-1]) == pytest.approx(0.1) and "its steps to t = 0.1 s are kept" in ds.attrs["failure"]
 
 
+def test_a_ctrl_c_while_the_command_loads_ends_it_without_a_traceback(monkeypatch, capsys):
+    """A Ctrl-C in the first tenth of a second of a command, while its modules load and before it listened for the
+    signal, ended in a KeyboardInterrupt traceback. Now: "error: interrupted", exit 130, as later in the command."""
+    from workbench import cli
+    from workbench.running import threads
+
+    def loading():
+        raise KeyboardInterrupt
+
+    monkeypatch.setattr(threads, "lean_process", loading)
+    monkeypatch.setattr(sys, "argv", ["workbench", "run", "tp1"])
+    assert cli.console() == 130
+    assert capsys.readouterr().err.strip() == "error: interrupted"
+
+
 def test_an_interrupted_run_in_python_carries_what_it_computed(monkeypatch):
     """In a notebook, the kernel's interrupt (KeyboardInterrupt) inside a step: ``workbench.Interrupted``, still a
     KeyboardInterrupt, whose ``dataset`` holds the steps before."""

@@ -731,14 +731,18 @@ def console() -> int:
     """The ``workbench`` command, a process of its own: one that runs no sweep skips what it does not use
     (:func:`workbench.running.threads.lean_process`, first: the module imports nothing heavy); ``study`` may send
     its cases to a dask cluster. On several MPI processes an unexpected error on one rank ends them all (the others
-    would wait for it in their next exchange)."""
-    if sys.argv[1:2] != ["study"]:
-        from .running.threads import lean_process
-
-        lean_process()
-    _terminate_as_interrupt()
+    would wait for it in their next exchange). A Ctrl-C before :func:`main` listens (while the modules load) ends
+    the command as one inside it does, without a traceback."""
     try:
+        if sys.argv[1:2] != ["study"]:
+            from .running.threads import lean_process
+
+            lean_process()
+        _terminate_as_interrupt()
         return main()
+    except KeyboardInterrupt:
+        print("error: interrupted", file=sys.stderr)
+        return 130
     except Exception:
         from .parallel import abort_on_error
 

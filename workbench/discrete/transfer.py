@@ -18,7 +18,10 @@ its strain wherever a fine cell straddles coarse cells, by as much as the error 
 ``error_V`` came out 25-59 % low and its order 0.70 against 0.27, found by an outside pass). Both fields' strains and
 stresses are constant per cell there, so the norm of their difference is a sum over the cells' overlaps
 (:class:`Overlap`): exact where a fine cell lies in one coarse cell, sampled at the centroids of its equal sub-cells
-(256 in 2D, 64 in 3D) where it straddles several.
+(256 in 2D, 64 in 3D) where it straddles several. The bonding field beta, constant per contact facet, is differenced
+the same way over the facets' overlaps (:class:`FacetOverlap`: each fine facet cut into 64 equal pieces, each taken by
+the coarse facet it lies on); a fine facet given the coarse value at its midpoint misplaced the coarse jumps of beta
+by up to a fine facet wherever it straddled two coarse ones.
 
 On a curved side, a fine vertex may lie just outside the coarser faceted mesh (by
 O(h^2)): it takes its nearest coarse cell, whose field is extrapolated to it, and a
@@ -59,6 +62,38 @@ class MeshInfo:
         self.p0 = ngs.L2(self.mesh, order=0)
         self.bspace, self.beta_dofs, self.facet_measure, self.facet_xyz = bonding_space(self.mesh, self.dim, self.contact)
         self._strain_matrix = None
+        self._facet_vertices = None
+
+    def facet_vertices(self) -> np.ndarray:
+        """The coordinates of each contact facet's vertices (facet, vertex, coordinate), facets in beta's order
+        (:func:`~workbench.discrete.discretisation.bonding_space`: the contact side's elements in order)."""
+        if self._facet_vertices is None:
+            elements = self.mesh.Boundaries(self.contact).Elements()
+            at = np.array([[v.nr for v in el.vertices] for el in elements], dtype=np.int64)
+            self._facet_vertices = self.xyz[at.reshape(-1, self.dim)]
+        return self._facet_vertices
+
+    def locate_on_contact(self, points: np.ndarray) -> np.ndarray:
+        """The contact facet (position in beta's order) each of ``points`` lies on: among the facets of the 16
+        nearest midpoints, the one inside which its projection lies, or least outside (on a curved side, two faceted
+        meshes differ by O(h^2)). A point farther out than half a facet is an error."""
+        from scipy.spatial import cKDTree
+
+        V = self.facet_vertices()
+        k, tree, out = min(16, len(V)), cKDTree(self.facet_xyz), np.empty(len(points), dtype=np.int64)
+        for start in range(0, len(points), 20_000):  # (a block at a time: 16 candidates' edges are 0.8 kB a point)
+            p = points[start:start + 20_000]
+            near = np.asarray(tree.query(p, k=k)[1]).reshape(len(p), k)
+            a = V[near, 0]  # (point, candidate, coordinate)
+            E = V[near, 1:] - a[:, :, None, :]  # (point, candidate, edge, coordinate)
+            gram = np.einsum("pced,pcfd->pcef", E, E)
+            lam = np.linalg.solve(gram, np.einsum("pced,pcd->pce", E, p[:, None, :] - a)[..., None])[..., 0]
+            least = np.minimum(lam.min(axis=2), 1.0 - lam.sum(axis=2))  # (the smallest barycentric coordinate)
+            best = np.argmax(least, axis=1)
+            if least[np.arange(len(p)), best].min() < -0.5:
+                raise ValueError("transfer: a contact facet of the fine mesh is off the coarse mesh's contact side")
+            out[start:start + len(p)] = near[np.arange(len(p)), best]
+        return out
 
     def locate(self, points: np.ndarray, vb=ngs.VOL):
         """Cell numbers of ``points`` (n x dim) in this mesh (boundary elements with ``vb = BND``).
@@ -159,6 +194,7 @@ class Transfer:
         self.identity = same
         self.P = None  # P1 on both: the vertex interpolation matrix (else NGSolve interpolates)
         self._overlap, self._vertex_cells = None, None  # (P1 on both, not nested: :meth:`difference_norms`' own)
+        self._facet_overlap = None  # (not nested, 2D and 3D: beta's, :meth:`difference_norms`)
         if same:
             return
         if coarse.order == 1 and fine.order == 1:
@@ -212,18 +248,27 @@ class Transfer:
     def facets(self, values: np.ndarray) -> np.ndarray:
         return values if self.identity else values[..., self.facet_map]
 
-    def difference_norms(self, fine_fields, coarse_fields, dbeta=None) -> tuple:
+    def difference_norms(self, fine_fields, coarse_fields, betas=None) -> tuple:
         """(|du|_V, |dsigma|_Q, |dbeta|_L2(Gamma3)) of the fine run's fields less the coarse run's, each given as
-        (u_dofs, u_nodes, stress) of one snapshot: over the cells' overlaps where the meshes are not nested (module
+        (u_dofs, u_nodes, stress) of one snapshot, and ``betas`` (the fine run's beta, the coarse run's) where the
+        model has one: over the cells' and the contact facets' overlaps where the meshes are not nested (module
         docs), else on the fine mesh with the coarse fields carried there."""
         (uf, nf, sf), (uc, nc, sc) = fine_fields, coarse_fields
+        beta = np.nan if betas is None else self._beta_norm(*betas)
         if self._vertex_cells is None:
-            return norms(self.fine, uf - self.displacement(uc, nc), sf - self.cells(sc), dbeta)
+            V, Q, _ = norms(self.fine, uf - self.displacement(uc, nc), sf - self.cells(sc), None)
+            return V, Q, beta
         if self._overlap is None:
             self._overlap = Overlap(self.coarse, self.fine, self._vertex_cells)
         o = self._overlap
-        V = o.norm(p1_cell_strains(self.fine, nf), p1_cell_strains(self.coarse, nc))
-        return V, o.norm(sf, sc), norms(self.fine, None, None, dbeta)[2]
+        return o.norm(p1_cell_strains(self.fine, nf), p1_cell_strains(self.coarse, nc)), o.norm(sf, sc), beta
+
+    def _beta_norm(self, fine_beta: np.ndarray, coarse_beta: np.ndarray) -> float:
+        if self.exact or self.identity or self.fine.dim == 1:
+            return norms(self.fine, None, None, fine_beta - self.facets(coarse_beta))[2]
+        if self._facet_overlap is None:
+            self._facet_overlap = FacetOverlap(self.coarse, self.fine)
+        return self._facet_overlap.norm(fine_beta, coarse_beta)
 
 
 class Overlap:
@@ -252,6 +297,31 @@ class Overlap:
 
     DESCRIPTION = ("cell overlaps (meshes not nested): exact where a fine cell lies in one coarse cell, sampled at "
                    "{samples} points where it straddles several")
+
+
+class FacetOverlap:
+    """The overlaps of a fine mesh's contact facets with a coarse mesh's not nested in it: each fine facet cut into
+    64 equal pieces (segments in 2D, a triangle's red refinement three times in 3D), each piece taken by the coarse
+    facet its centre lies on (:meth:`MeshInfo.locate_on_contact`)."""
+
+    PIECES = 64
+
+    def __init__(self, coarse: MeshInfo, fine: MeshInfo):
+        if fine.dim == 2:
+            s = (np.arange(self.PIECES) + 0.5) / self.PIECES
+            lam = np.stack([1.0 - s, s], axis=1)
+        else:
+            lam = subcell_centroids(2, 3)
+        V = fine.facet_vertices()
+        points = np.einsum("mk,fkd->fmd", lam, V).reshape(-1, fine.dim)
+        self.fine_facet = np.repeat(np.arange(len(V)), len(lam))
+        self.coarse_facet = coarse.locate_on_contact(points)
+        self.measure = np.repeat(fine.facet_measure / len(lam), len(lam))
+
+    def norm(self, fine_values: np.ndarray, coarse_values: np.ndarray) -> float:
+        """The L2 norm over the contact side of a field constant per facet on the fine mesh less one on the coarse."""
+        d = fine_values[self.fine_facet] - coarse_values[self.coarse_facet]
+        return float(np.sqrt(np.sum(self.measure * d ** 2)))
 
 
 #: Levels of equal halving of a straddling cell's edges (:func:`subcell_centroids`): 4^4 = 256 sub-triangles in 2D,

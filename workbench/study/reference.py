@@ -126,12 +126,12 @@ def compare_runs(case_scene, ds, ref_scene, R, compare) -> dict:
     parts, sizes = [], []
     for t in compare:
         i_c, i_f = snapshot_index(cds, t), snapshot_index(fds, t)
-        dbeta = beta = None
+        betas = beta = None
         if "beta" in ds:
             beta = fds.beta.sel(time=t, method="nearest").values
-            dbeta = beta - tr.facets(cds.beta.sel(time=t, method="nearest").values)
+            betas = (beta, cds.beta.sel(time=t, method="nearest").values)
         fields = [(d.u_dofs.values[i], d.u_nodes.values[i], d.stress.values[i]) for d, i in ((fds, i_f), (cds, i_c))]
-        parts.append(tr.difference_norms(*fields, dbeta))
+        parts.append(tr.difference_norms(*fields, betas))
         sizes.append(transfer.norms(fi, fds.u_dofs.values[i_f], fds.stress.values[i_f], beta))
     t_rec = ds.time.values
     ref_probe = R.u_probe.sel(time=t_rec, method="nearest").values
