@@ -750,5 +750,24 @@ def console() -> int:
         raise
 
 
+def command() -> None:
+    """The ``workbench`` executable: :func:`console`, after which a run on one process ends at once. Its results are
+    written and closed by then, and the interpreter's teardown only gave back memory the system takes back anyway:
+    0.2 s of the 4 s a run of the 3D Hertz body at 47k dofs takes (its matrices, factors and mesh freed one by one).
+    A study (worker processes to join) and a run on several MPI processes (MPI to finalize) exit as usual."""
+    code = console()
+    if sys.argv[1:2] == ["run"]:
+        from .discrete.world import launched
+
+        if launched() <= 1:
+            for stream in (sys.stdout, sys.stderr):
+                try:
+                    stream.flush()
+                except (OSError, ValueError):  # (a reader that left, a stream closed: nothing more to say)
+                    pass
+            os._exit(code)
+    sys.exit(code)
+
+
 if __name__ == "__main__":  # pragma: no cover
-    sys.exit(console())
+    command()
