@@ -464,11 +464,14 @@ sys.exit(console())
 """
 
 
-@pytest.mark.parametrize("signum, code", [(2, 130), (15, 143)], ids=["SIGINT", "SIGTERM"])
+@pytest.mark.parametrize("signum, code", [(2, 130), (15, 143), (1, 129), (24, 152), (10, 138)],
+                         ids=["SIGINT", "SIGTERM", "SIGHUP", "SIGXCPU", "SIGUSR1"])
 def test_a_run_stopped_by_a_signal_writes_the_steps_it_took(tmp_path, signum, code):
     """Ctrl-C (SIGINT) or SIGTERM (a batch scheduler's time limit) ended ``workbench run -o`` with nothing written:
     every step computed was lost. Now the steps recorded before are written as a diverged run's are (incomplete, the
-    message in ``failure``), and the exit code is 128 + the signal's number."""
+    message in ``failure``), and the exit code is 128 + the signal's number. SIGHUP (the terminal closed), SIGXCPU (a
+    CPU time limit) and SIGUSR1 (a scheduler's warning) still ended the process at once (an outside pass); now the
+    same."""
     p = subprocess.run([sys.executable, "-c", _SIGNALLED_AT, str(signum), "run", "tp5", "--h", "0.1", "--k", "0.01",
                         "--T", "1", "--no-progress", "-o", "a.nc"], cwd=tmp_path, capture_output=True, text=True)
     assert p.returncode == code and "Traceback" not in p.stderr, p.stderr
@@ -476,6 +479,24 @@ def test_a_run_stopped_by_a_signal_writes_the_steps_it_took(tmp_path, signum, co
     ds = workbench.load(tmp_path / "a.nc")
     assert ds.attrs["status"] == "incomplete" and ds.attrs["failure_type"] == "Interrupted"
     assert float(ds.time[-1]) == pytest.approx(0.1) and "its steps to t = 0.1 s are kept" in ds.attrs["failure"]
+
+
+def test_a_run_whose_messages_cannot_be_shown_still_writes_its_archive(tmp_path):
+    """The status line was printed before the archive was written: a log on a full disk (or a reader of the pipe that
+    left, a terminal gone, a locale that cannot encode the scene's name) lost the whole run to an OSError or a
+    UnicodeEncodeError (an outside pass). Now the archive comes first, and a message that cannot be shown is dropped
+    or escaped."""
+    (tmp_path / "s.toml").write_text('scene = "tp1"\nname = "Prüfung β"\n', encoding="utf-8")
+    with open("/dev/full", "w") as full:
+        p = subprocess.run([sys.executable, "-m", "workbench.cli", "run", "tp1", *RUN_TINY, "-o", "a.nc"],
+                           cwd=tmp_path, stdout=full, stderr=subprocess.PIPE, text=True)
+    assert p.returncode == 0 and "Traceback" not in p.stderr, p.stderr
+    assert workbench.load(tmp_path / "a.nc").attrs["status"] == "complete"
+    p = subprocess.run([sys.executable, "-m", "workbench.cli", "run", "s.toml", *RUN_TINY, "-o", "b.nc"], cwd=tmp_path,
+                       capture_output=True, env=dict(os.environ, PYTHONIOENCODING="latin-1"))
+    assert p.returncode == 0 and b"Traceback" not in p.stderr, p.stderr
+    assert "Pr\\xfcfung \\u03b2" in p.stdout.decode("latin-1") or "Prüfung \\u03b2" in p.stdout.decode("latin-1")
+    assert workbench.load(tmp_path / "b.nc").attrs["status"] == "complete"
 
 
 def test_a_ctrl_c_while_the_command_loads_ends_it_without_a_traceback(monkeypatch, capsys):

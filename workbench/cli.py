@@ -61,7 +61,7 @@ def _one_line(text: str) -> str:
 
 
 def _show_warning(message, category, filename, lineno, file=None, line=None):
-    print(f"warning: {_one_line(message)}", file=sys.stderr)
+    _say(f"warning: {_one_line(message)}", sys.stderr)
 
 
 def _overrides(args, swept=()) -> dict:
@@ -174,11 +174,10 @@ def _write_or_keep(ds, path=None):
     try:
         results.write(ds, keep)
     except OSError as err2:
-        print(_one_line(f"error: {what}keeping the result in {keep} failed too ({err2.strerror or err2})"),
-              file=sys.stderr)
+        _say(_one_line(f"error: {what}keeping the result in {keep} failed too ({err2.strerror or err2})"), sys.stderr)
         return EXIT_NOT_WRITTEN, None
     if err is not None:
-        print(_one_line(f"error: {what}the result is kept in {keep}"), file=sys.stderr)
+        _say(_one_line(f"error: {what}the result is kept in {keep}"), sys.stderr)
     return (EXIT_NOT_WRITTEN if err is not None else 0), keep
 
 
@@ -191,14 +190,15 @@ def _write_extras(ds, outputs, kept) -> int:
     code = 0
     for option, path, write in outputs:
         try:
-            print(write(path))
+            text = write(path)
         except OSError as err:
             if kept is None:
                 _, kept = _write_or_keep(ds)
             where = f"the results are kept in {kept}" if kept is not None else "the results could not be kept"
-            print(_one_line(f"error: {option} {path} could not be written ({err.strerror or err}); {where}"),
-                  file=sys.stderr)
+            _say(_one_line(f"error: {option} {path} could not be written ({err.strerror or err}); {where}"), sys.stderr)
             code = EXIT_NOT_WRITTEN
+            continue
+        _say(text)
     return code
 
 
@@ -284,14 +284,14 @@ def cmd_run(args) -> int:
     except Diverged as err:
         if err.dataset is None:  # (several MPI processes: rank 0 has the result and says it)
             return EXIT_DIVERGED
-        print(_one_line(f"error: {err}"), file=sys.stderr)
+        _say(_one_line(f"error: {err}"), sys.stderr)
         ds, code = err.dataset, EXIT_DIVERGED
     except Interrupted as err:  # (Ctrl-C, SIGTERM: the steps before are written as a diverged run's are)
         if err.dataset is None and _other_rank():  # (several MPI processes: rank 0 has the result and says it)
             return 128 + err.signal
         if err.dataset is None:
             raise
-        print(_one_line(f"error: {err}"), file=sys.stderr)
+        _say(_one_line(f"error: {err}"), sys.stderr)
         ds, code = err.dataset, 128 + err.signal
     if ds is None:  # (several MPI processes: rank 0 holds the result and writes it)
         return code
@@ -330,18 +330,18 @@ def _first_signal_stops() -> None:
     import signal
     import threading
 
-    from .discrete.world import launched
+    from .discrete.world import launched, stop_signals, stopped_by
 
     if launched() > 1 or threading.current_thread() is not threading.main_thread():
         return
 
     def stop(signum, frame):
         _stop_listening()
-        if signum == signal.SIGTERM:
-            raise Interrupted("terminated (SIGTERM)", signal=signum)
+        if signum != signal.SIGINT:
+            raise Interrupted(stopped_by(signum), signal=signum)
         raise KeyboardInterrupt
 
-    for s in (signal.SIGINT, signal.SIGTERM):
+    for s in stop_signals():
         signal.signal(s, stop)
 
 
@@ -352,22 +352,25 @@ def _stop_listening() -> None:
     import signal
     import threading
 
+    from .discrete.world import stop_signals
+
     if threading.current_thread() is threading.main_thread():
-        for s in (signal.SIGINT, signal.SIGTERM):
+        for s in stop_signals():
             signal.signal(s, signal.SIG_IGN)
 
 
 def _write_outputs(args, ds, code: int) -> int:
-    print(_status_line(ds))
-    kept = None
-    if args.output:
+    kept, said = None, []
+    if args.output:  # (the archive first: a status line that could not be printed lost the run, before it)
         target = _stopped_beside(args, ds) if code else args.output
         written, kept = _write_or_keep(ds, target)
         if written == 0:
-            print(f"wrote {target}" + (" (incomplete: see attrs 'failure')" if code else ""))
+            said.append(f"wrote {target}" + (" (incomplete: see attrs 'failure')" if code else ""))
         if target != args.output:
-            print(f"{args.output} keeps the state the run can go on from (--restart {args.output})")
+            said.append(f"{args.output} keeps the state the run can go on from (--restart {args.output})")
         code = code or written
+    for line in [_status_line(ds)] + said:
+        _say(line)
     outputs = []
     if args.plot:
         def plot(path):
@@ -389,8 +392,23 @@ def _write_outputs(args, ds, code: int) -> int:
     extras = _write_extras(ds, outputs, kept)  # written whatever the code so far (a diverged run is plotted too)
     code = code or extras
     if not args.output and not args.plot:
-        print(_summary(ds))
+        _say(_summary(ds))
     return code
+
+
+def _say(text: str, stream=None) -> None:
+    """print ``text``, where the terminal or pipe may be gone (an ssh session dropped, a reader that left, a log on a
+    full disk) or may not encode it (a Latin-1 locale, a scene named in Greek): a message that cannot be shown is
+    dropped, or its characters escaped, and the command goes on to write what it computed."""
+    stream = sys.stdout if stream is None else stream
+    try:
+        try:
+            print(text, file=stream)
+        except UnicodeEncodeError:
+            encoding = stream.encoding or "ascii"
+            print(text.encode(encoding, "backslashreplace").decode(encoding), file=stream)
+    except (OSError, ValueError):
+        pass
 
 
 def _summary(ds) -> str:
@@ -715,16 +733,16 @@ def _terminate_as_interrupt() -> None:
     together (:func:`workbench.discrete.world.request_stop`), instead of raising where each rank happens to be."""
     import signal
 
-    from .discrete.world import launched, request_stop
+    from .discrete.world import launched, request_stop, stop_signals, stopped_by
 
     def interrupt(signum, frame):
-        raise Interrupted("terminated (SIGTERM)", signal=signum)
+        raise Interrupted(stopped_by(signum), signal=signum)
 
-    if launched() <= 1:
-        signal.signal(signal.SIGTERM, interrupt)
-    else:
-        for signum in (signal.SIGINT, signal.SIGTERM):
+    for signum in stop_signals():
+        if launched() > 1:
             signal.signal(signum, lambda signum, frame: request_stop(signum))
+        elif signum != signal.SIGINT:
+            signal.signal(signum, interrupt)
 
 
 def console() -> int:

@@ -68,7 +68,32 @@ def alone(environment=None) -> dict:
     return {key: value for key, value in environment.items() if not key.startswith(("PMI_", "OMPI_", "MV2_", "PMIX_"))}
 
 
-#: The signal (SIGINT, SIGTERM) that asked the processes of a distributed run to stop, 0 for none
+#: The signals that stop a run on the command line and keep its steps, where the system has them: Ctrl-C (SIGINT),
+#: SIGTERM (``kill``, a scheduler's time limit), SIGHUP (the terminal closed: an ssh session dropped), SIGXCPU (a CPU
+#: time limit: ``ulimit -t``, a scheduler's soft limit) and SIGUSR1/2 (a scheduler's warning before its limit, e.g.
+#: Slurm's ``--signal``). All but the first two ended the process at once, every step lost (an outside pass).
+STOP_SIGNALS = ("SIGINT", "SIGTERM", "SIGHUP", "SIGXCPU", "SIGUSR1", "SIGUSR2")
+
+
+def stop_signals() -> list:
+    """:data:`STOP_SIGNALS` this system has, as numbers."""
+    import signal
+
+    return [signal.Signals[name] for name in STOP_SIGNALS if name in signal.Signals.__members__]
+
+
+def stopped_by(signum: int) -> str:
+    """What a stop signal did, for a message: "interrupted" (Ctrl-C) or "terminated (SIGHUP)".
+
+    >>> stopped_by(2), stopped_by(15)
+    ('interrupted', 'terminated (SIGTERM)')
+    """
+    import signal
+
+    return "interrupted" if signum == signal.SIGINT else f"terminated ({signal.Signals(signum).name})"
+
+
+#: The signal (one of :func:`stop_signals`) that asked the processes of a distributed run to stop, 0 for none
 #: (:func:`request_stop`).
 _STOP = [0]
 
@@ -89,10 +114,10 @@ def stop_requested() -> int:
 
 @contextlib.contextmanager
 def signals_held(drop: bool = False):
-    """SIGINT and SIGTERM held inside (the main thread's): delivered when the block ends, or dropped (``drop``: the
-    run has stopped already, and what it computed is being kept). A Ctrl-C inside a netCDF write (a checkpoint)
-    left xarray's lock taken, and the final archive's write hung on it; a second Ctrl-C while an interrupted run's
-    records became a Dataset lost them (found by an outside pass)."""
+    """The stop signals (:func:`stop_signals`) held inside (the main thread's): delivered when the block ends, or dropped
+    (``drop``: the run has stopped already, and what it computed is being kept). A Ctrl-C inside a netCDF write (a
+    checkpoint) left xarray's lock taken, and the final archive's write hung on it; a second Ctrl-C while an interrupted
+    run's records became a Dataset lost them (found by an outside pass)."""
     import signal
     import threading
 
@@ -100,7 +125,7 @@ def signals_held(drop: bool = False):
         yield
         return
     came = []
-    held = {s: signal.getsignal(s) for s in (signal.SIGINT, signal.SIGTERM)}
+    held = {s: signal.getsignal(s) for s in stop_signals()}
     for s in held:
         signal.signal(s, signal.SIG_IGN if drop else (lambda signum, frame: came.append(signum)))
     try:

@@ -14,12 +14,11 @@ from __future__ import annotations
 
 import collections
 import math
-import signal
 import sys
 
 import numpy as np
 
-from ..discrete.world import SERIAL, stop_requested
+from ..discrete.world import SERIAL, stop_requested, stopped_by
 from ..errors import Diverged, Interrupted
 
 
@@ -606,7 +605,7 @@ class _Guard:
         if self.world.parallel:
             signum = int(self.world.max(stop_requested()))
             if signum:
-                raise Interrupted("interrupted" if signum == signal.SIGINT else "terminated (SIGTERM)", signal=signum,
+                raise Interrupted(stopped_by(signum), signal=signum,
                                   together=True)
 
     def check(self, n: int, t_prev: float, t: float) -> None:
@@ -639,6 +638,28 @@ class _NoBar:
         pass
 
 
+class _BarThatMayLoseItsTerminal:
+    """A bar whose terminal may go away during the run (an ssh session dropped, a log on a full disk): a write that
+    fails ends the bar, not the run (it lost every step, found by an outside pass)."""
+
+    def __init__(self, bar):
+        self.bar = bar
+
+    def update(self, n=1):
+        self._call("update", n)
+
+    def close(self):
+        self._call("close")
+
+    def _call(self, name, *args):
+        if self.bar is None:
+            return
+        try:
+            (self.bar.update if name == "update" else self.bar.close)(*args)
+        except (OSError, ValueError, UnicodeError):
+            self.bar = None
+
+
 def progress_bar(progress, **options):
     """tqdm's bar when one is shown (``progress``, or None: on a terminal), else a stand-in: tqdm's import (30 ms,
     with its monitor thread) is not paid by runs that show none."""
@@ -650,7 +671,10 @@ def progress_bar(progress, **options):
         from tqdm.std import tqdm  # without ipywidgets, which is no dependency: the text bar it falls back to)
     else:
         from tqdm.auto import tqdm
-    return tqdm(**options)
+    try:
+        return _BarThatMayLoseItsTerminal(tqdm(**options))
+    except (OSError, ValueError, UnicodeError):
+        return _NoBar()
 
 
 def _control(steps, k, err) -> dict:
