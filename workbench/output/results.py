@@ -131,7 +131,22 @@ def _versions() -> tuple:
             out.append((f"version_{pkg}", md.version(pkg)))
         except md.PackageNotFoundError:
             out.append((f"version_{pkg}", "unknown"))
-    return tuple(out)
+    return tuple(out) + (("version_workbench_code", code_digest()),)
+
+
+def code_digest() -> str:
+    """The sha256 (16 hex digits) of the package's source files, names and contents: which code made a result. The
+    version number stays the same between releases, so a study resumed after a change to the code reused the cases
+    of the code before without a word, and a restart went on across it (found by an outside pass); the cases are
+    keyed by this digest, and a restart names it where it changed. 86 files, 11 ms, once per process."""
+    import hashlib
+    from pathlib import Path
+
+    root = Path(__file__).resolve().parent.parent
+    h = hashlib.sha256()
+    for path in sorted(p for p in root.rglob("*.py") if "__pycache__" not in p.parts):
+        h.update(path.relative_to(root).as_posix().encode() + b"\0" + path.read_bytes() + b"\0")
+    return h.hexdigest()[:16]
 
 
 class Recorder:

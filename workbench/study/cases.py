@@ -10,7 +10,7 @@ coupled parameter is not an axis of its own.
 A finished case is archived as one netCDF file. The file stores the canonical
 JSON of everything that determines its Dataset (every scene value after the case
 values were applied, the recorded and snapshot times, the workbench and NGSolve
-versions) and its hash: a file whose inputs differ from the case's, or that
+versions, the digest of workbench's code) and its hash: a file whose inputs differ from the case's, or that
 cannot be read (empty, truncated by a kill), is recomputed, and the reason is
 reported (:func:`read_case`).
 
@@ -170,19 +170,15 @@ def _coerce(scene, name, value):
 
 def inputs(case_scene, record_times, snapshots) -> dict:
     """Everything that determines a case's Dataset (what its archive is keyed by)."""
-    import importlib.metadata as md
-
-    def version(pkg):
-        try:
-            return md.version(pkg)
-        except md.PackageNotFoundError:
-            return "unknown"
+    from ..output.results import versions
 
     # (checkpoint_every is where a run writes, not what it computes)
     scene = {k: v for k, v in case_scene.plain().items() if k != "checkpoint_every"}
+    v = versions()
     return {"scene": scene, "base_scene": case_scene.base, "model": case_scene.model,
             "record_times": [float(t) for t in record_times], "snapshots": [float(t) for t in snapshots],
-            "workbench": version("workbench"), "ngsolve": version("ngsolve")}
+            "workbench": v["version_workbench"], "workbench_code": v["version_workbench_code"],
+            "ngsolve": v["version_ngsolve"]}
 
 
 def canonical(obj) -> str:
