@@ -368,8 +368,8 @@ def check(path, archive: xr.Dataset, state: dict, scene, model_terms) -> None:
                       "result meets the same tolerance, not bitwise)", RuntimeWarning, stacklevel=3)
     a = archive.attrs
     now = results.versions()
-    changed = [f"{k[8:]} {a[k]} -> {now[k]}" for k in ("version_workbench", "version_workbench_code", "version_ngsolve")
-               if k in a and a[k] != now[k]]
+    compared = ("version_workbench", "version_workbench_code", "version_ngsolve")
+    changed = [f"{k[8:]} {a[k]} -> {now[k]}" for k in compared if k in a and a[k] != now[k]]
     if changed:
         warnings.warn(f"restart {str(path)!r}: the archive was made by other versions ({', '.join(changed)}); the "
                       "continued run may differ from an uninterrupted one: by round-off, or, where the code changed, by "
