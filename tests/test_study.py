@@ -310,6 +310,24 @@ def test_stale_temporary_files_are_removed(tmp_path):
     assert sorted(p.name for p in tmp_path.iterdir()) == sorted(["a.nc", live.name])
 
 
+def test_an_archive_name_of_up_to_255_bytes_is_written(tmp_path):
+    """An -o of 236-255 bytes passed the check before the run, then failed at its end: the temporary beside it took
+    its name and 20 bytes more (found by an outside pass). Such a name's temporary takes a digest of it; a stale
+    one is still removed."""
+    ds = workbench.run("tp1", h=0.1, k=0.1, progress=False)
+    from workbench.output import files
+
+    for n in (235, 250):
+        target = tmp_path / ("b" * (n - 3) + ".nc")
+        dead = subprocess.run([sys.executable, "-c", "import os; print(os.getpid())"], capture_output=True, text=True)
+        stale = tmp_path / f".{files._stem(target)}.{int(dead.stdout)}.0badc0de.tmp"
+        stale.write_bytes(b"x")
+        workbench.write(ds, target)
+        assert workbench.load(target).attrs["status"] == "complete" and not stale.exists()
+    with pytest.raises(workbench.ParameterError, match="256 bytes long"):
+        files.check_output(tmp_path / ("b" * 253 + ".nc"), "-o")
+
+
 SNIPPET = """
 from workbench import Study
 st = Study("tp2", k=[0.02, 0.01, 0.005], reference="ode")

@@ -499,6 +499,45 @@ def test_a_run_whose_messages_cannot_be_shown_still_writes_its_archive(tmp_path)
     assert workbench.load(tmp_path / "b.nc").attrs["status"] == "complete"
 
 
+def test_a_scene_file_with_a_byte_order_mark_and_a_cluster_without_dask(tmp_path, monkeypatch):
+    """Found by an outside pass: a TOML file saved with a UTF-8 byte-order mark (Windows editors) was refused as an
+    "invalid statement" at its first line, which looks valid in the editor; now read. A study given a scheduler
+    address where dask.distributed is not installed ended in a ModuleNotFoundError traceback; now refused by name."""
+    import importlib.util
+
+    (tmp_path / "bom.toml").write_bytes(b"\xef\xbb\xbf" + b'scene = "tp1"\n[parameters]\nh = 0.1\n')
+    assert workbench.scene(str(tmp_path / "bom.toml"))["h"] == 0.1
+    find_spec = importlib.util.find_spec
+    monkeypatch.setattr(importlib.util, "find_spec", lambda name, *a: None if name == "distributed" else
+                        find_spec(name, *a))
+    with pytest.raises(ParameterError, match=r"dask.distributed.*pip install 'workbench\[dask\]'"):
+        workbench.Study("tp1", k=[0.1, 0.05], client="tcp://127.0.0.1:1")
+
+
+def test_names_that_are_not_utf8_are_refused_before_the_run(tmp_path):
+    """A folder or file named in another encoding (Latin-1 on an old system, a share, a zip file): the run was done,
+    then nothing could be written, not even the copy in the temporary folder (netCDF takes UTF-8 only, and the scene
+    file's path is an attribute); an expression with such a byte, a traceback; a good archive in such a folder,
+    "cannot be read as an archive" (an outside pass). Each is now refused before any work, naming it."""
+    folder = os.fsencode(tmp_path) + b"/Messung_D\xe4mpfer"
+    os.mkdir(folder)
+    examples = Path(__file__).resolve().parent.parent / "docs" / "examples"
+    with open(folder + b"/slab.toml", "wb") as f:
+        f.write((examples / "slab_pull.toml").read_bytes())
+    workbench.write(workbench.run("tp1", h=0.1, k=0.05, T=0.1, progress=False), tmp_path / "a.nc")
+    with open(folder + b"/a.nc", "wb") as f:
+        f.write((tmp_path / "a.nc").read_bytes())
+    cases = [(["run", os.fsdecode(folder + b"/slab.toml"), "-o", "out.nc"], tmp_path),
+             (["run", "tp1", "-o", "out.nc"], folder),
+             (["run", "--restart", "a.nc", "--T", "0.2", "-o", "b.nc"], folder),
+             (["run", "tp1", "--set", os.fsdecode(b"traction_top=(0, t)\xff")], tmp_path)]
+    for args, cwd in cases:
+        p = subprocess.run([sys.executable, "-m", "workbench.cli", *args, "--no-progress"], cwd=cwd,
+                           capture_output=True, text=True, errors="backslashreplace")
+        assert p.returncode == 2 and "Traceback" not in p.stderr and "not UTF-8" in p.stderr, (args, p.stderr)
+    assert not any(name.endswith(b".nc") and name != b"a.nc" for name in os.listdir(folder))
+
+
 def test_a_ctrl_c_while_the_command_loads_ends_it_without_a_traceback(monkeypatch, capsys):
     """A Ctrl-C in the first tenth of a second of a command, while its modules load and before it listened for the
     signal, ended in a KeyboardInterrupt traceback. Now: "error: interrupted", exit 130, as later in the command."""

@@ -675,6 +675,7 @@ def main(argv=None) -> int:
             if _other_rank():  # (several MPI processes: rank 0 speaks for all; the others say nothing)
                 sys.stdout = open(os.devnull, "w")
                 warnings.simplefilter("ignore")
+            _utf8_arguments(argv)
             args = build_parser().parse_args(argv)
             token = invocation.set(shlex.join(["workbench"] + argv))
             _one_case_per_launch(args.command)
@@ -698,6 +699,18 @@ def main(argv=None) -> int:
             if sys.stdout is not stdout:
                 sys.stdout.close()
                 sys.stdout = stdout
+
+
+def _utf8_arguments(argv) -> None:
+    """Refuse an argument holding bytes that are not UTF-8 (a name typed in another encoding): in an expression it
+    ended in a UnicodeEncodeError traceback, in a path after the run, with its archive lost (an outside pass)."""
+    for arg in argv:
+        try:
+            arg.encode("utf-8")
+        except UnicodeEncodeError:
+            shown = arg.encode("utf-8", "backslashreplace").decode("utf-8")
+            raise ParameterError(f"the argument '{shown}' holds bytes that are not UTF-8 (typed or named in another "
+                                 "encoding): give it in UTF-8, or rename the file or folder it names") from None
 
 
 def _one_case_per_launch(command: str) -> None:

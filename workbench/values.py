@@ -15,6 +15,7 @@ import difflib
 import json
 import math
 import numbers
+import os
 from collections.abc import Iterable
 from dataclasses import dataclass
 
@@ -263,3 +264,26 @@ def check_threads(value, name: str):
         raise ParameterError(f"{name} {value!r}: give an integer from 1 to {4 * cores} (NGSolve TaskManager threads, "
                              f"at most four per core; this machine has {cores})")
     return value
+
+
+def check_utf8_path(path, what: str) -> None:
+    """Refuse a path whose absolute form holds bytes that are not UTF-8 (a folder named in Latin-1 on an old system,
+    a share, a zip file): netCDF takes its paths and attributes as UTF-8, so the run was done and its archive lost,
+    the copy kept in the temporary folder too, since the scene file's path is one of its attributes (found by an
+    outside pass). ``what`` names the option or parameter.
+
+    >>> check_utf8_path("out/a.nc", "-o")
+    >>> try:
+    ...     check_utf8_path("M" + chr(0xDCE4) + "rz.nc", "-o")  # (the byte 0xe4 of a Latin-1 name, as Python reads it)
+    ... except ParameterError as err:
+    ...     print(str(err).split("': ")[1].split(' (')[0])
+    its path holds bytes that are not UTF-8
+    """
+    full = os.path.abspath(os.path.expanduser(str(path)))
+    try:
+        full.encode("utf-8")
+    except UnicodeEncodeError:
+        shown = full.encode("utf-8", "backslashreplace").decode("utf-8")
+        raise ParameterError(f"{what} '{shown}': its path holds bytes that are not UTF-8 (a name made in another "
+                             "encoding); netCDF takes UTF-8 paths only: rename the file or the folder it is "
+                             "in") from None

@@ -149,6 +149,9 @@ def digest(path) -> str:
 
 def check_file(path, name: str = "mesh") -> Path:
     """The absolute path of an existing mesh file of a known kind, or a ParameterError naming ``name``."""
+    from ..values import check_utf8_path
+
+    check_utf8_path(path, f"{name} =")  # (its path is an attribute of the archive)
     p = Path(path).expanduser()
     if not p.exists():
         raise ParameterError(f"{name} = {str(path)!r}: no such file")

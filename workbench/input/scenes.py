@@ -634,6 +634,9 @@ def _read_toml(path: Path) -> dict:
     """The table of a scene file; a file that is missing, unreadable or not TOML is a ParameterError naming it."""
     import stat
 
+    from ..values import check_utf8_path
+
+    check_utf8_path(path, "scene file")  # (its path is an attribute of the archive)
     label = str(path) if len(str(path)) <= 200 else str(path)[:200] + "..."
     try:
         mode = path.stat()
@@ -655,7 +658,8 @@ def _read_toml(path: Path) -> dict:
     except OSError as err:
         raise ParameterError(f"scene file {label!r} cannot be read: {err.strerror}") from None
     try:
-        return tomllib.loads(raw.decode("utf-8"))
+        # (utf-8-sig: a byte-order mark, as Windows editors write one, was an "invalid statement" at line 1)
+        return tomllib.loads(raw.decode("utf-8-sig"))
     except UnicodeDecodeError:
         raise ParameterError(f"scene file {label!r} is not a text (UTF-8 TOML) file") from None
     except tomllib.TOMLDecodeError as err:

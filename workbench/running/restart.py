@@ -216,6 +216,9 @@ def restore(state: dict, disc, scheme, steps, recorder, archive: xr.Dataset) -> 
 def read(path):
     """(Dataset, state) of the archive at ``path``; ParameterError if it cannot be read, NoRestartState if it holds
     no state to continue from."""
+    from ..values import check_utf8_path
+
+    check_utf8_path(path, "restart")  # ("cannot be read as an archive" of a good archive in a folder named in Latin-1)
     path = Path(path)
     if not path.is_file():
         raise ParameterError(f"restart {str(path)!r}: no such archive" + (" (a directory)" if path.is_dir() else ""))

@@ -405,6 +405,12 @@ def _check_arguments(*, sweep, grids, couple, measures, client) -> None:
         raise ParameterError(f"measures = {measures!r}: give a function of a case's Dataset returning a dict of numbers")
     if isinstance(client, (int, float, bool)):
         raise ParameterError(f"client = {client!r}: give a dask.distributed Client or a scheduler address")
+    if isinstance(client, str):
+        import importlib.util
+
+        if importlib.util.find_spec("distributed") is None:  # (a ModuleNotFoundError traceback, an outside pass)
+            raise ParameterError(f"client = {client!r} (--scheduler): a dask cluster needs dask.distributed, which is "
+                                 "not installed: pip install 'workbench[dask]'")
 
 
 def _reference(spec, study):
