@@ -441,7 +441,12 @@ class _Run:
         status = "complete" if failure is None else "incomplete"
         try:
             with signals_held(drop=True) if isinstance(failure, Interrupted) else contextlib.nullcontext():
-                return self.recorder.dataset(self.attrs(status, failure, self.clock.wall, self.clock.cpu))
+                try:
+                    return self.recorder.dataset(self.attrs(status, failure, self.clock.wall, self.clock.cpu))
+                except MemoryError:
+                    if not _drop_snapshots(self.recorder):
+                        raise
+                    return self.recorder.dataset(self.attrs(status, failure, self.clock.wall, self.clock.cpu))
         except Exception:
             if not isinstance(failure, Interrupted):
                 raise
@@ -530,8 +535,8 @@ class _Run:
             if not self.world.root:
                 return
             with signals_held():  # (a Ctrl-C inside netCDF's write left its lock taken: delivered after the write)
-                self._write(restarts.attach(self.recorder.dataset(self.attrs("checkpoint", None,
-                                                                             *self.clock.elapsed())), state), t)
+                self._write(lambda: restarts.attach(self.recorder.dataset(self.attrs("checkpoint", None,
+                                                                                     *self.clock.elapsed())), state), t)
 
         return after_step
 
@@ -556,17 +561,36 @@ class _Run:
         if self.checkpoint is None or every <= 0 or self.steps.done() or n < self.follow.checkpoint_step + every:
             return
         self.follow.checkpoint_step = n
-        ds = self.recorder.dataset(self.attrs("checkpoint", None, *self.clock.elapsed()))
-        ds = restarts.attach(follow.merge(self.follow.segments + [(self.disc, ds, None)], self.follow, self),
-                             self.follow.saved[1])
-        self._write(ds, t)
 
-    def _write(self, ds, t) -> None:
-        """Write the checkpoint ``ds`` (atomically); a full disk should not stop a long run: say so once, go on."""
+        def made():
+            ds = self.recorder.dataset(self.attrs("checkpoint", None, *self.clock.elapsed()))
+            return restarts.attach(follow.merge(self.follow.segments + [(self.disc, ds, None)], self.follow, self),
+                                   self.follow.saved[1])
+
+        self._write(made, t)
+
+    def _write(self, made, t) -> None:
+        """Write the checkpoint ``made()`` returns (atomically); a full disk, or too little memory to make it (a
+        MemoryError ended the run, an outside pass), should not stop a long run: say so once, go on."""
         try:
-            results.write(ds, self.checkpoint)
-        except OSError as err:
+            results.write(made(), self.checkpoint)
+        except (OSError, MemoryError) as err:
             if self.failed_checkpoint is None:
                 self.failed_checkpoint = err
+                why = "out of memory" if isinstance(err, MemoryError) else err.strerror or err
                 warnings.warn(f"checkpoint {self.checkpoint} could not be written at t = {t:.6g} s "
-                              f"({err.strerror or err}); the run goes on", RuntimeWarning, stacklevel=3)
+                              f"({why}); the run goes on", RuntimeWarning, stacklevel=3)
+
+
+def _drop_snapshots(recorder) -> bool:
+    """Where the memory left cannot hold the field snapshots made into arrays (a run of many snapshots under a limit
+    such as ``ulimit -v``, a scheduler's ``h_vmem``): drop them and keep the records, with a warning; a MemoryError
+    there lost every step after the run was done (found by an outside pass). False where there are none to drop."""
+    dropped = len(recorder.snaps)
+    if not dropped:
+        return False
+    recorder.snaps.clear()
+    warnings.warn(f"out of memory while the {dropped} field snapshots were made into the archive: they are dropped, "
+                  "the records of every step kept (ask for fewer snapshots, or for more memory)", RuntimeWarning,
+                  stacklevel=4)
+    return True
