@@ -558,6 +558,20 @@ def test_a_run_short_of_memory_for_its_snapshots_keeps_its_records(tmp_path, mon
     assert ds.attrs["status"] == "complete" and ds.sizes["time"] == 11 and "snapshot_time" not in ds.coords
 
 
+def test_a_file_size_limit_is_named_when_the_archive_cannot_be_written(tmp_path):
+    """Under ``ulimit -f`` the archive failed with netCDF's own words alone, "NetCDF: HDF error", as a full disk does
+    (an outside pass): the limit is named now."""
+    import resource
+
+    def limit():
+        resource.setrlimit(resource.RLIMIT_FSIZE, (40_000, resource.getrlimit(resource.RLIMIT_FSIZE)[1]))
+
+    p = subprocess.run([sys.executable, "-m", "workbench.cli", "run", "tp4", "--no-progress", "-o", "f.nc"],
+                       cwd=tmp_path, capture_output=True, text=True, preexec_fn=limit)
+    assert p.returncode == 4 and "Traceback" not in p.stderr, p.stderr
+    assert "files are limited to 0.04 MB here by ulimit -f" in p.stderr, p.stderr
+
+
 def test_a_ctrl_c_while_the_command_loads_ends_it_without_a_traceback(monkeypatch, capsys):
     """A Ctrl-C in the first tenth of a second of a command, while its modules load and before it listened for the
     signal, ended in a KeyboardInterrupt traceback. Now: "error: interrupted", exit 130, as later in the command."""

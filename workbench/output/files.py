@@ -118,12 +118,36 @@ def atomic_write(path, writer) -> Path:
         tmp.unlink(missing_ok=True)
         said = str(err).splitlines()[0] if str(err) else type(err).__name__
         if isinstance(err, OSError):
-            raise OSError(err.errno or errno.EIO, err.strerror or said, str(path)) from None
-        raise OSError(errno.EIO, said, str(path)) from None
+            raise OSError(err.errno or errno.EIO, (err.strerror or said) + _limits(path.parent), str(path)) from None
+        raise OSError(errno.EIO, said + _limits(path.parent), str(path)) from None
     except BaseException:
         tmp.unlink(missing_ok=True)
         raise
     return path
+
+
+def _limits(folder: Path) -> str:
+    """What may have stopped a write, said beside the library's words: netCDF reports a full disk as "NetCDF: HDF
+    error" or "Permission denied", and a file size limit (``ulimit -f``, which makes a write fail with EFBIG) the
+    same way (found by an outside pass)."""
+    import shutil
+
+    said = []
+    try:
+        import resource
+
+        soft = resource.getrlimit(resource.RLIMIT_FSIZE)[0]
+        if soft != resource.RLIM_INFINITY:
+            said.append(f"files are limited to {soft / 1e6:.3g} MB here by ulimit -f")
+    except (ImportError, OSError, ValueError):  # (no resource module: Windows)
+        pass
+    try:
+        free = shutil.disk_usage(folder).free
+        if free < 100e6:
+            said.append(f"its disk has {free / 1e6:.3g} MB free")
+    except OSError:
+        pass
+    return "".join(f"; {s}" for s in said)
 
 
 def check_output(path, option: str, *, folder: bool = False) -> Path:
