@@ -313,7 +313,7 @@ def test_stale_temporary_files_are_removed(tmp_path):
 def test_an_archive_name_of_up_to_255_bytes_is_written(tmp_path):
     """An -o of 236-255 bytes passed the check before the run, then failed at its end: the temporary beside it took
     its name and 20 bytes more (found by an outside pass). Such a name's temporary takes a digest of it; a stale
-    one is still removed."""
+    one is still removed. An -o that is a symbolic link was replaced by a file; it is written through now."""
     ds = workbench.run("tp1", h=0.1, k=0.1, progress=False)
     from workbench.output import files
 
@@ -326,6 +326,10 @@ def test_an_archive_name_of_up_to_255_bytes_is_written(tmp_path):
         assert workbench.load(target).attrs["status"] == "complete" and not stale.exists()
     with pytest.raises(workbench.ParameterError, match="256 bytes long"):
         files.check_output(tmp_path / ("b" * 253 + ".nc"), "-o")
+    (tmp_path / "runs").mkdir()
+    (tmp_path / "latest.nc").symlink_to(tmp_path / "runs" / "r5.nc")  # (written through, as the shell's > does)
+    workbench.write(ds, tmp_path / "latest.nc")
+    assert (tmp_path / "latest.nc").is_symlink() and workbench.load(tmp_path / "runs" / "r5.nc").sizes == ds.sizes
 
 
 SNIPPET = """

@@ -101,6 +101,8 @@ def atomic_write(path, writer) -> Path:
     reports a full disk as RuntimeError). A leading ``~`` is the home folder, as xarray and matplotlib read it (taken
     as a folder named ``~``, the temporary went to the home folder through xarray and was left there)."""
     path = Path(path).expanduser()
+    if path.is_symlink():  # (written through the link, as the shell's ``>`` does: it was replaced by a file, its
+        path = path.resolve()  # target keeping the old content, found by an outside pass)
     if path.exists() and not path.is_file() and not path.is_dir():
         raise OSError(errno.EEXIST, "it exists and is not a regular file (a device, a pipe or a socket): it is not "
                                     "replaced", str(path))
