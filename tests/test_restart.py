@@ -419,3 +419,32 @@ def test_an_archive_of_an_older_code_without_a_record_goes_on(tmp_path):
     assert went_on.sizes["time"] == straight.sizes["time"] and np.isnan(went_on.contact_pressure[:n]).all()
     np.testing.assert_array_equal(went_on.contact_pressure[n:], straight.contact_pressure[n:])
     np.testing.assert_array_equal(went_on.u_contact, straight.u_contact)
+
+
+def test_a_restart_asking_for_later_snapshots_alone_says_what_to_give_and_a_stopped_run_its_steps(tmp_path):
+    """Found by an outside pass: a restart asking only for a snapshot after the archive's time was refused as
+    "snapshots [0.33] -> []", which named neither why nor what to give; and a stopped run's ``nsteps`` was the count
+    planned, with nothing saying how many it took."""
+    ds = workbench.run("memory_rod", h=0.25, k=0.1, T=1, snapshots=(0.3,), progress=False)
+    workbench.write(ds, tmp_path / "a.nc")
+    with pytest.raises(workbench.ParameterError, match=r"give them with the later ones, snapshots = 0.3, 1.5\)"):
+        workbench.run(restart=tmp_path / "a.nc", T=2, snapshots=(1.5,), progress=False)
+    assert workbench.run(restart=tmp_path / "a.nc", T=2, snapshots=(0.3, 1.5), progress=False).sizes["snapshot"] == 3
+    assert ds.attrs["steps_taken"] == ds.attrs["nsteps"] == 10
+    from workbench.schemes import stepping
+
+    advance = stepping._advance
+
+    def stop_after_four(scheme, steps, t_prev, t):
+        if t_prev >= 0.35:
+            raise KeyboardInterrupt
+        return advance(scheme, steps, t_prev, t)
+
+    stepping._advance = stop_after_four
+    try:
+        with pytest.raises(KeyboardInterrupt) as err:
+            workbench.run("memory_rod", h=0.25, k=0.1, T=1, snapshots=(), progress=False)
+    finally:
+        stepping._advance = advance
+    stopped = err.value.dataset.attrs
+    assert stopped["nsteps"] == 10 and stopped["steps_taken"] == 4 and stopped["steps_taken_units"] == "1"

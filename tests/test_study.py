@@ -899,5 +899,27 @@ def test_a_study_without_a_folder_leaves_none(tmp_path, monkeypatch):
     import tempfile
 
     monkeypatch.setattr(tempfile, "tempdir", str(tmp_path))  # (this test's own temporary folder: others run beside)
+    # a study killed (SIGTERM, kill -9) still leaves its folder: the next one removes those whose process is gone
+    dead = int(subprocess.run([sys.executable, "-c", "import os; print(os.getpid())"], capture_output=True,
+                              text=True).stdout)
+    folders = {name: tmp_path / name for name in (f"workbench-study-{dead}-ab12", f"workbench-study-{os.getppid()}-cd",
+                                                   "workbench-study-old_name", "workbench-study-new_name")}
+    for folder in folders.values():
+        folder.mkdir()
+        (folder / "case.nc").write_bytes(b"x")
+    os.utime(folders["workbench-study-old_name"], (time.time() - 2 * 86400,) * 2)
     ds = Study("tp1", k=[0.04, 0.02], workers=0).run(progress=False)
-    assert np.isfinite(ds.error.values).all() and not list(tmp_path.glob("workbench-study-*"))
+    assert np.isfinite(ds.error.values).all()
+    assert sorted(p.name for p in tmp_path.glob("workbench-study-*")) == \
+        sorted([f"workbench-study-{os.getppid()}-cd", "workbench-study-new_name"])
+
+
+def test_a_resumed_study_counts_the_time_of_the_cases_it_ran_alone(tmp_path):
+    """A resumed study said "running 1 new case(s) (... summed over workers: 80.1 s)" where the new case took 39 s:
+    the reused cases' time was counted too (an outside pass)."""
+    Study("tp1", k=[0.1, 0.05], reference="exact", workers=0).run(tmp_path, progress=False)
+    st = Study("tp1", k=[0.1, 0.05, 0.025], reference="exact", workers=0)
+    ds = st.run(tmp_path, progress=False)
+    new = ds.sel(k=0.025).squeeze()
+    assert st.overhead["new_cases"] == 1
+    assert st.overhead["cases"] == pytest.approx(float(new.wall_time) + float(new.setup_time), rel=1e-9)

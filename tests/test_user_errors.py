@@ -558,6 +558,22 @@ def test_a_run_short_of_memory_for_its_snapshots_keeps_its_records(tmp_path, mon
     assert ds.attrs["status"] == "complete" and ds.sizes["time"] == 11 and "snapshot_time" not in ds.coords
 
 
+def test_snapshots_that_will_not_fit_in_memory_are_warned_about_before_the_run(monkeypatch):
+    """20,000 snapshots of a 3D block (about 64 GB) were taken without a word (an outside pass): the estimate of
+    their memory, against the memory free, is now a warning before the run (here a machine of 1 MB free; the
+    factorisation's own check refuses far above that)."""
+    from workbench.running import preflight
+
+    sc = workbench.scene("tp4", h=0.1, k=0.05, T=0.5, snapshots=tuple(np.arange(1, 10) * 0.05))
+    est = preflight.estimate(sc.model_of().geometry, sc["order"])
+    monkeypatch.setattr(preflight, "available_memory", lambda: 2 * est.bytes)
+    with pytest.warns(RuntimeWarning, match=r"snapshots: the 10 field snapshots hold about .* GB until the archive"):
+        workbench.run(sc, progress=False)
+    with warnings.catch_warnings():
+        warnings.simplefilter("error")
+        workbench.run(sc.with_(snapshots=()), progress=False)
+
+
 def test_a_file_size_limit_is_named_when_the_archive_cannot_be_written(tmp_path):
     """Under ``ulimit -f`` the archive failed with netCDF's own words alone, "NetCDF: HDF error", as a full disk does
     (an outside pass): the limit is named now."""

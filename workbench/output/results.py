@@ -466,7 +466,7 @@ def brief(value, head: int = 3, tail: int = 2) -> str:
 
 #: Units of the non-parameter attributes a run writes.
 ATTR_UNITS = {"h_max": "m", "k_actual": "s", "k_crit": "s", "k_crit_min": "s", "setup_time": "s", "wall_time": "s",
-              "cpu_time": "s", "ndof": "1", "nsteps": "1", "threads": "1", "memory_peak_mb": "MB",
+              "cpu_time": "s", "ndof": "1", "nsteps": "1", "steps_taken": "1", "threads": "1", "memory_peak_mb": "MB",
               "contact_candidates": "1", "contact_candidates_missed": "1"}
 
 

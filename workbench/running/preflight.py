@@ -83,6 +83,7 @@ def resources(scene, model, n_steps: int, processes: int = 1) -> None:
     iterative = may_iterate(scene["scheme"], scene["contact_solver"])
     est = estimate(model.geometry, scene["order"], scene["solver"], iterative)
     free = available_memory()
+    _snapshot_memory(scene, model.geometry, est.ndof, free)
     if est.bytes > 0.9 * free:
         which = "h" if not any(scene.values.get(n, 0) for n in model.geometry.cell_names) else "nx/ny/nz"
         raise ParameterError(f"{which} = {scene['h']:g} (order {scene['order']}) gives about {est.ndof:.2g} "
@@ -90,6 +91,23 @@ def resources(scene, model, n_steps: int, processes: int = 1) -> None:
                              f"more than the {free / 2**30:.3g} GB this machine has free: use a larger h or a lower "
                              "order" + ("" if not iterative or scene["solver"] == "cg" else
                                         ", or solver = 'cg' (no factor)"))
+
+
+def _snapshot_memory(scene, geometry, ndof: int, free: float) -> None:
+    """Warn where the field snapshots asked for will not fit in the free memory: they are held until the archive is
+    made, and twice while it is (20,000 snapshots of a 3D block, about 64 GB, were taken without a word, and a run
+    of 200 under a memory limit did every step and then lost them all, found by an outside pass; what does not fit
+    now is dropped at the end, the records kept, :func:`workbench.running.runner._drop_snapshots`)."""
+    count = len([t for t in scene["snapshots"] if t < scene["T"]]) + 1  # (and the field at T)
+    cells = {1: 1, 2: 2, 3: 6}[geometry.dim] * geometry.vertex_count()  # (simplices per vertex, about)
+    each = 8.0 * (ndof + cells * (3 * geometry.dim - 1) + geometry.vertex_count() * geometry.dim)
+    if count > 1 and 2.0 * count * each > 0.9 * free:
+        import warnings
+
+        warnings.warn(f"snapshots: the {count} field snapshots hold about {count * each / 2**30:.3g} GB until the "
+                      f"archive is made, and twice that while it is, more than the {free / 2**30:.3g} GB this "
+                      "machine has free: ask for fewer (what does not fit is dropped at the end, the records kept)",
+                      RuntimeWarning, stacklevel=5)
 
 
 def refusals(scene, model, numerics, grid, times, processes: int = 1) -> None:

@@ -332,10 +332,15 @@ def differences(old, new, t: float, old_terms: str, new_terms: str) -> list:
         if key in ALLOWED:
             continue
         va, vb = a.get(key, "(absent)"), b.get(key, "(absent)")
+        said = ""
         if key == "snapshots" and isinstance(va, list) and isinstance(vb, list):  # later ones are output options
+            later = [s for s in vb if s > t + tol]
             va, vb = [s for s in va if s <= t + tol], [s for s in vb if s <= t + tol]
+            # (a restart asking for later snapshots alone was refused as "[0.33] -> []", an outside pass)
+            said = (f" (the snapshots up to t = {t:g} s are the archive's: give them with the later ones, "
+                    f"snapshots = {', '.join(f'{x:g}' for x in va + later)})")
         if json.dumps(va, sort_keys=True) != json.dumps(vb, sort_keys=True):
-            out.append(f"{key} {_text(va)} -> {_text(vb)}")
+            out.append(f"{key} {_text(va)} -> {_text(vb)}{said}")
     return out
 
 

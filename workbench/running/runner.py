@@ -461,7 +461,8 @@ class _Run:
                        "nsteps": steps.accepted_steps, "accepted_steps": steps.accepted_steps,
                        "rejected_steps": steps.rejected_steps}
         else:
-            control = {"k_actual": steps.k_max, "nsteps": steps.taken if status == "checkpoint" else steps.n_steps}
+            control = {"k_actual": steps.k_max, "nsteps": steps.taken if status == "checkpoint" else steps.n_steps,
+                       "steps_taken": steps.taken}  # (nsteps: those planned; a stopped run took fewer, an outside pass)
         extra = {
             "scheme": self.scheme.name, "h_max": g.h_max(), "cells": "x".join(map(str, g.cells())),
             **control, "ndof": self.disc.ndof_global, "threads": self.numerics.threads or 1,
