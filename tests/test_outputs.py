@@ -104,6 +104,9 @@ def test_figures_say_what_they_show(tmp_path):
     fig = figures.rod_displacement_evolution(tp2)
     titles = " ".join([fig._suptitle.get_text() if fig._suptitle else ""] + [ax.get_title() for ax in fig.axes])
     assert "disagree with the reduced ODE" in titles, titles
+    adaptive = workbench.run("tp2", scheme="bdf2", rtol=1e-3, T=0.2, progress=False)  # (its title gave "k = 0.0908",
+    title = plotting.overview(adaptive)._suptitle.get_text()  # the largest step, as if chosen: an outside pass)
+    assert f"rtol = 0.001, {adaptive.attrs['accepted_steps']} steps" in title and "k = " not in title, title
     st = Study("tp1", k=[0.1, 0.05], h=[0.1], reference="exact", workers=0)
     study = st.run(progress=False)
     fig = plotting.convergence(study)

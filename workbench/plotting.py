@@ -153,8 +153,11 @@ def overview(ds, path=None):
         elif panel == "pressure_t":
             _pressure_state_panel(ax, ds)
     status = "" if ds.attrs.get("status") == "complete" else "  [INCOMPLETE]"
+    # (error-controlled: its tolerance and steps; "k = " the largest step read as a step the user chose, an outside pass)
+    steps = f"rtol = {ds.attrs['rtol']:.3g}, {ds.attrs['accepted_steps']} steps" if "accepted_steps" in ds.attrs \
+        else f"k = {ds.attrs.get('k_actual'):.3g}"
     fig.suptitle(f"{plain(ds.attrs.get('scene'))}: scheme {ds.attrs.get('scheme')}, h = {ds.attrs.get('h_max'):.3g}, "
-                 f"k = {ds.attrs.get('k_actual'):.3g}{status}", fontsize=9)
+                 f"{steps}{status}", fontsize=9)
     return _save(fig, path)
 
 
