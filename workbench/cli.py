@@ -14,7 +14,8 @@ Exit codes: 0 done; 2 a user's mistake (one line ``error: ...`` on stderr, befor
 work); 3 the run diverged (the computed part is kept and marked incomplete); 4 an
 output could not be written at the end (the result is kept elsewhere, and the
 message says where); 130 (Ctrl-C) and 143 (SIGTERM) interrupted (a run keeps the steps it
-recorded, as for 3). Warnings are printed as one line ``warning: ...`` each.
+recorded, as for 3), and so 129 (SIGHUP: the terminal closed), 152 (SIGXCPU: a CPU time limit), 138 and 140
+(SIGUSR1, SIGUSR2: a scheduler's warning). Warnings are printed as one line ``warning: ...`` each.
 """
 from __future__ import annotations
 
