@@ -4,6 +4,7 @@ References: the built-in scene of the same body and mesh (a mesh written to a gm
 the same vertices and elements, so the runs must agree bitwise); the named errors of docs/conventions.md.
 """
 import math
+import os
 import re
 import subprocess
 import sys
@@ -305,6 +306,40 @@ def test_the_hertz_mesh_cache_gives_the_mesh_it_would_make(tmp_path, monkeypatch
         assert header + b"\n" == meshes.CACHE_MAGIC and line.split()[0] == good.split(b"\n")[1].split()[0]
         assert np.array_equal(np.array(pickle.loads(payload).Coordinates()), np.array(made.Coordinates()))
     assert meshes.RECIPES >= 1
+
+
+def test_the_mesh_cache_reads_only_the_users_own_folders(tmp_path, monkeypatch):
+    """Every lookup read the shared temporary folder's meshes too, without checking who made it: a mesh planted
+    there (with its tag and digest, which anyone can compute) was taken for another, and a pickle runs code (an
+    outside pass). The temporary folder is now read only where the cache cannot be written, and only where it is
+    this user's alone; else a private folder is made."""
+    import hashlib
+    import pickle
+    import tempfile
+
+    import netgen.meshing as nm
+
+    def triangle(n):
+        m = nm.Mesh(dim=2)
+        m.AddPoints(np.array([[0.0, 0.0, 0.0], [1.0, 0.0, 0.0], [0.0, 1.0 / n, 0.0]]))
+        return m
+
+    monkeypatch.setattr(tempfile, "tempdir", str(tmp_path / "tmp"))
+    (tmp_path / "tmp").mkdir()
+    shared = meshes._fallback_folder()
+    shared.mkdir(parents=True)
+    payload = pickle.dumps(triangle(5))  # (planted where another user could put it)
+    (shared / f"netgen-{meshes._tag('planted')}.pickle").write_bytes(
+        meshes.CACHE_MAGIC + f"{meshes._tag('planted')} {hashlib.sha256(payload).hexdigest()}\n".encode() + payload)
+    monkeypatch.setenv("WORKBENCH_CACHE", str(tmp_path / "cache"))
+    got = meshes.cached_netgen("planted", lambda: triangle(3))
+    assert float(np.array(got.Coordinates())[2, 1]) == pytest.approx(1.0 / 3.0)
+    (tmp_path / "file").write_text("")
+    monkeypatch.setenv("WORKBENCH_CACHE", str(tmp_path / "file"))  # (cannot be written: the temporary folder ...)
+    os.chmod(shared.parent, 0o777)  # (... which is not this user's alone: not read, a private one made)
+    with pytest.warns(RuntimeWarning, match="workbench-meshes-"):
+        got = meshes.cached_netgen("planted", lambda: triangle(3))
+    assert float(np.array(got.Coordinates())[2, 1]) == pytest.approx(1.0 / 3.0)
 
 
 def test_a_mesh_cache_that_cannot_be_written_falls_back_to_the_temporary_folder(tmp_path, monkeypatch):

@@ -923,3 +923,20 @@ def test_a_resumed_study_counts_the_time_of_the_cases_it_ran_alone(tmp_path):
     new = ds.sel(k=0.025).squeeze()
     assert st.overhead["new_cases"] == 1
     assert st.overhead["cases"] == pytest.approx(float(new.wall_time) + float(new.setup_time), rel=1e-9)
+
+
+def test_the_code_digest_skips_an_editors_files(tmp_path):
+    """A dangling link in the package, as Emacs leaves one while a file is edited (.#cli.py), made the digest fail
+    with FileNotFoundError at the end of every run: no archive (an outside pass). An editor's files are not code."""
+    import shutil
+    from pathlib import Path
+
+    from workbench.output import results
+
+    package = Path(workbench.__file__).resolve().parent
+    shutil.copytree(package, tmp_path / "workbench", ignore=shutil.ignore_patterns("__pycache__"))
+    (tmp_path / "workbench" / ".#cli.py").symlink_to("user@host.1234:1700000000")
+    (tmp_path / "workbench" / ".backup.py").write_text("x = 1\n")
+    p = subprocess.run([sys.executable, "-c", "from workbench.output.results import code_digest; print(code_digest())"],
+                       capture_output=True, text=True, env=dict(os.environ, PYTHONPATH=str(tmp_path)), cwd=tmp_path)
+    assert p.returncode == 0 and p.stdout.strip() == results.code_digest(), p.stderr

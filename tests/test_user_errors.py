@@ -481,6 +481,34 @@ def test_a_run_stopped_by_a_signal_writes_the_steps_it_took(tmp_path, signum, co
     assert float(ds.time[-1]) == pytest.approx(0.1) and "its steps to t = 0.1 s are kept" in ds.attrs["failure"]
 
 
+_SIGNALLED_AFTER_THE_LOOP = """
+import os, sys
+from workbench.running.threads import lean_process
+lean_process()  # (first, as the command does: xarray then looks for dask as it does there)
+from workbench.cli import console
+from workbench.output import results
+dataset, SIGNAL = results.Recorder.dataset, int(sys.argv.pop(1))
+
+def signalled(self, attrs):
+    os.kill(os.getpid(), SIGNAL)
+    return dataset(self, attrs)
+
+results.Recorder.dataset = signalled
+sys.exit(console())
+"""
+
+
+@pytest.mark.parametrize("signum", [15, 1])
+def test_a_signal_after_the_last_step_does_not_lose_the_run(tmp_path, signum):
+    """A stop signal landing after the last step, while the records became a Dataset or the state to go on from was
+    captured, lost the complete run: "error: interrupted", no archive (an outside pass, at 1 s of 3 s on a block).
+    The loop is over then: the signal is dropped, and the archive written."""
+    p = subprocess.run([sys.executable, "-c", _SIGNALLED_AFTER_THE_LOOP, str(signum), "run", "tp1", *RUN_TINY, "-o",
+                        "a.nc"], cwd=tmp_path, capture_output=True, text=True)
+    assert p.returncode == 0 and "Traceback" not in p.stderr and "interrupted" not in p.stderr, p.stderr
+    assert workbench.load(tmp_path / "a.nc").attrs["status"] == "complete"
+
+
 def test_a_run_whose_messages_cannot_be_shown_still_writes_its_archive(tmp_path):
     """The status line was printed before the archive was written: a log on a full disk (or a reader of the pipe that
     left, a terminal gone, a locale that cannot encode the scene's name) lost the whole run to an OSError or a
@@ -556,6 +584,7 @@ def test_a_run_short_of_memory_for_its_snapshots_keeps_its_records(tmp_path, mon
     assert any("could not be written at t = 0.2 s (out of memory); the run goes on" in m for m in messages), messages
     assert any("3 field snapshots" in m and "dropped" in m for m in messages), messages
     assert ds.attrs["status"] == "complete" and ds.sizes["time"] == 11 and "snapshot_time" not in ds.coords
+    assert ds.attrs["snapshots_dropped"] == 3 and ds.attrs["snapshots_dropped_units"] == "1"  # (said in the archive)
 
 
 def test_snapshots_that_will_not_fit_in_memory_are_warned_about_before_the_run(monkeypatch):
@@ -586,6 +615,36 @@ def test_a_file_size_limit_is_named_when_the_archive_cannot_be_written(tmp_path)
                        cwd=tmp_path, capture_output=True, text=True, preexec_fn=limit)
     assert p.returncode == 4 and "Traceback" not in p.stderr, p.stderr
     assert "files are limited to 0.04 MB here by ulimit -f" in p.stderr, p.stderr
+
+
+def test_closed_streams_an_unencodable_study_a_looping_link_and_a_cache_under_home(tmp_path, monkeypatch):
+    """Found by an outside pass on this stop's fixes: a run started with stdout closed wrote its archive, then ended
+    in an AttributeError, exit 1 (the early exit flushed None); with stderr closed the progress bar's check failed
+    before the first step, nothing written; ``study`` and ``show`` under an ASCII encoding with a scene named in Greek
+    ended in a traceback, the study's figure lost; ``-o`` naming a link that loops, a RuntimeError traceback;
+    WORKBENCH_CACHE = "~/x" made a folder named "~"."""
+    run = [sys.executable, "-m", "workbench.cli", "run", "tp1", *RUN_TINY]
+    for closed, name in ((1, "a.nc"), (2, "b.nc")):
+        p = subprocess.run(run + ["-o", name], cwd=tmp_path, stdout=None if closed == 2 else subprocess.DEVNULL,
+                           stderr=subprocess.DEVNULL if closed == 1 else None,
+                           preexec_fn=lambda fd=closed: os.close(fd))
+        assert p.returncode == 0 and workbench.load(tmp_path / name).attrs["status"] == "complete", closed
+    (tmp_path / "g.toml").write_text('scene = "tp1"\nname = "πλάκα"\n', encoding="utf-8")
+    ascii_env = dict(os.environ, PYTHONIOENCODING="ascii")
+    p = subprocess.run([sys.executable, "-m", "workbench.cli", "study", "g.toml", "--k", "0.1", "0.05", "--h", "0.1",
+                        "--reference", "exact", "--workers", "0", "--no-progress", "-o", "s.nc", "--plot", "s.png"],
+                       cwd=tmp_path, capture_output=True, env=ascii_env)
+    assert p.returncode == 0 and b"Traceback" not in p.stderr and (tmp_path / "s.png").exists(), p.stderr
+    p = subprocess.run([sys.executable, "-m", "workbench.cli", "show", "g.toml"], cwd=tmp_path, capture_output=True,
+                       env=ascii_env)
+    assert p.returncode == 0 and b"\\u03c0" in p.stdout, p.stderr
+    (tmp_path / "loop.nc").symlink_to("loop.nc")
+    p = subprocess.run(run + ["-o", "loop.nc"], cwd=tmp_path, capture_output=True, text=True)
+    assert p.returncode == 2 and "loops" in p.stderr and "Traceback" not in p.stderr, p.stderr
+    from workbench.input import meshes
+
+    monkeypatch.setenv("WORKBENCH_CACHE", "~/cache_of_workbench")
+    assert meshes.cache_folder() == Path.home() / "cache_of_workbench" / "meshes"
 
 
 def test_a_ctrl_c_while_the_command_loads_ends_it_without_a_traceback(monkeypatch, capsys):

@@ -208,7 +208,7 @@ def cmd_scenes(args) -> int:
 
     width = max(map(len, PRESETS))
     for name, preset in PRESETS.items():
-        print(f"{name:<{width}}  {preset.geometry:<5}  {preset.description}")
+        _say(f"{name:<{width}}  {preset.geometry:<5}  {preset.description}", listing=True)
     return 0
 
 
@@ -216,8 +216,8 @@ def cmd_show(args) -> int:
     from .input.scenes import scene
 
     sc = scene(args.scene, **_overrides(args))
-    print(f"{sc.name} ({sc.geometry}, {sc.dim}D, Model {sc.model}): {sc.description}")
-    print(f"terms assembled on the contact boundary: {', '.join(sc.terms) or 'none'}\n")
+    _say(f"{sc.name} ({sc.geometry}, {sc.dim}D, Model {sc.model}): {sc.description}", listing=True)
+    _say(f"terms assembled on the contact boundary: {', '.join(sc.terms) or 'none'}\n", listing=True)
     import shutil
     import textwrap
 
@@ -226,12 +226,12 @@ def cmd_show(args) -> int:
     rows = [(n, str(v), u, r, m) for n, v, u, r, m in sc.table()]
     w = [min(limits[i], max(len(r[i]) for r in rows + [("parameter", "value", "unit", "allowed", "")])) for i in range(4)]
     meaning = max(30, width - sum(w) - 8)
-    print(f"{'parameter':<{w[0]}}  {'value':<{w[1]}}  {'unit':<{w[2]}}  {'allowed':<{w[3]}}  meaning")
+    _say(f"{'parameter':<{w[0]}}  {'value':<{w[1]}}  {'unit':<{w[2]}}  {'allowed':<{w[3]}}  meaning", listing=True)
     for r in rows:
         cells = [textwrap.wrap(r[i], w[i]) or [""] for i in range(4)] + [textwrap.wrap(r[4], meaning) or [""]]
         for j in range(max(map(len, cells))):
             line = "  ".join(f"{(c[j] if j < len(c) else ''):<{w[i]}}" for i, c in enumerate(cells[:4]))
-            print(f"{line}  {cells[4][j] if j < len(cells[4]) else ''}".rstrip())
+            _say(f"{line}  {cells[4][j] if j < len(cells[4]) else ''}".rstrip(), listing=True)
     return 0
 
 
@@ -397,17 +397,23 @@ def _write_outputs(args, ds, code: int) -> int:
     return code
 
 
-def _say(text: str, stream=None) -> None:
+def _say(text: str, stream=None, listing: bool = False) -> None:
     """print ``text``, where the terminal or pipe may be gone (an ssh session dropped, a reader that left, a log on a
-    full disk) or may not encode it (a Latin-1 locale, a scene named in Greek): a message that cannot be shown is
-    dropped, or its characters escaped, and the command goes on to write what it computed."""
+    full disk, a stream closed) or may not encode it (a Latin-1 locale, a scene named in Greek): a message that cannot
+    be shown is dropped, or its characters escaped, and the command goes on to write what it computed. A ``listing``
+    (``show``, ``scenes``: nothing to write) stops where its reader left, as Unix tools do (exit 141)."""
     stream = sys.stdout if stream is None else stream
+    if stream is None:  # (the process was started with it closed)
+        return
     try:
         try:
             print(text, file=stream)
         except UnicodeEncodeError:
             encoding = stream.encoding or "ascii"
             print(text.encode(encoding, "backslashreplace").decode(encoding), file=stream)
+    except BrokenPipeError:
+        if listing:
+            raise
     except (OSError, ValueError):
         pass
 
@@ -513,7 +519,7 @@ def cmd_study(args) -> int:
         code, kept = _write_or_keep(ds, args.output)
         if code == 0:
             kept_cases = archive.is_dir() and any(archive.glob("*.nc"))  # (its folder may have gone during the run)
-            print(f"wrote {args.output}" + (f" (cases in {archive}/)" if kept_cases else " (its cases were not kept)"))
+            _say(f"wrote {args.output}" + (f" (cases in {archive}/)" if kept_cases else " (its cases were not kept)"))
     missing = along_rtol = False
     for norm in ("error", "error_V", "error_Q", "error_beta", "error_beta_end"):
         rates = ds.observed_order.sel(norm=norm)
@@ -522,17 +528,17 @@ def cmd_study(args) -> int:
         if found:
             missing |= any("n/a" in v for v in found.values())
             along_rtol |= "rtol" in found
-            print(f"observed order of {norm}: {found}")
+            _say(f"observed order of {norm}: {found}")
     if along_rtol:  # (not an order of the scheme: how the error follows the tolerance asked)
-        print("(along rtol: the slope of the error against the tolerance, 1 where the error is proportional to it)")
+        _say("(along rtol: the slope of the error against the tolerance, 1 where the error is proportional to it)")
     if missing:
-        print("(n/a: no order to fit there: errors of 0, or, with the extrapolated reference, differences between "
+        _say("(n/a: no order to fit there: errors of 0, or, with the extrapolated reference, differences between "
               "levels that do not fall)")
     o = st.overhead
     if o["new_cases"] or o["extended_cases"]:
         ran = f"{o['new_cases']} new case(s)" + (f" and continuing {o['extended_cases']} archived at a shorter T"
                                                  if o["extended_cases"] else "")
-        print(f"study: {o['execute']:.1f} s running {ran} (the cases' own setup + time loops, summed over workers: "
+        _say(f"study: {o['execute']:.1f} s running {ran} (the cases' own setup + time loops, summed over workers: "
               f"{o['cases']:.1f} s), {o['evaluate']:.1f} s comparing fields")
     outputs = []
     for option, path, draw in (("--plot", args.plot, "convergence"), ("--pareto", args.pareto, "pareto")):
@@ -571,22 +577,22 @@ def cmd_reproduce(args) -> int:
             result = reproduction.reproduce(problem, args.out, h=args.h, k=args.k, side=not args.no_side,
                                             vtk=args.vtk, **overrides)
         except Diverged as err:  # as `workbench run`: say so, keep what was computed, exit 3 (after the others)
-            print(_one_line(f"error: {err}"), file=sys.stderr)
+            _say(_one_line(f"error: {err}"), sys.stderr)
             if err.dataset is not None:
                 written, where = _write_or_keep(err.dataset, Path(args.out) / f"{problem}_diverged.nc")
                 if written == 0:
-                    print(f"  wrote {where} (incomplete: see attrs 'failure')\n")
+                    _say(f"  wrote {where} (incomplete: see attrs 'failure')\n")
             code = EXIT_DIVERGED
             continue
         except NotWritten as err:  # keep the run (exit 4, after the other problems)
             _, where = _write_or_keep(err.dataset)  # (a copy in the temporary folder; if that fails, it says so)
             if where is not None:
-                print(_one_line(f"error: {err.filename} could not be written ({err.strerror}); the result is kept in "
-                                f"{where}"), file=sys.stderr)
+                _say(_one_line(f"error: {err.filename} could not be written ({err.strerror}); the result is kept in "
+                               f"{where}"), sys.stderr)
             code = max(code, EXIT_NOT_WRITTEN)
             continue
-        print(reproduction.report(problem, result))
-        print(f"  wrote {len(result['files'])} files to {args.out} ({time.perf_counter() - t0:.1f} s)\n")
+        _say(reproduction.report(problem, result))
+        _say(f"  wrote {len(result['files'])} files to {args.out} ({time.perf_counter() - t0:.1f} s)\n")
     return code
 
 
@@ -683,10 +689,12 @@ def main(argv=None) -> int:
             return args.func(args)
         except ParameterError as err:
             if sys.stdout is stdout:
-                print(_one_line(f"error: {err}"), file=sys.stderr)
+                _say(_one_line(f"error: {err}"), sys.stderr)
             return EXIT_BAD_INPUT
         except KeyboardInterrupt as err:
-            print("error: interrupted", file=sys.stderr)
+            from .discrete.world import stopped_by
+
+            _say(f"error: {stopped_by(err.signal) if isinstance(err, Interrupted) else 'interrupted'}", sys.stderr)
             return 128 + err.signal if isinstance(err, Interrupted) else 130
         except BrokenPipeError:  # the reader left (`workbench show tp5 | head`): stop quietly, as Unix tools do
             try:
@@ -773,7 +781,7 @@ def console() -> int:
         _terminate_as_interrupt()
         return main()
     except KeyboardInterrupt:
-        print("error: interrupted", file=sys.stderr)
+        _say("error: interrupted", sys.stderr)
         return 130
     except Exception:
         from .parallel import abort_on_error
@@ -794,7 +802,8 @@ def command() -> None:
         if launched() <= 1:
             for stream in (sys.stdout, sys.stderr):
                 try:
-                    stream.flush()
+                    if stream is not None:  # (None: started with it closed)
+                        stream.flush()
                 except (OSError, ValueError):  # (a reader that left, a stream closed: nothing more to say)
                     pass
             os._exit(code)

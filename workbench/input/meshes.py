@@ -40,9 +40,10 @@ SUFFIXES = (".msh", ".vol", ".vol.gz")
 
 
 def cache_folder() -> Path:
-    """Where meshes made from Python objects are stored (``$WORKBENCH_CACHE`` or ~/.cache/workbench)."""
-    root = os.environ.get("WORKBENCH_CACHE") or os.path.join(os.path.expanduser("~"), ".cache", "workbench")
-    return Path(root) / "meshes"
+    """Where meshes made from Python objects are stored (``$WORKBENCH_CACHE``, a leading ``~`` the home folder, or
+    ~/.cache/workbench)."""
+    root = os.environ.get("WORKBENCH_CACHE") or os.path.join("~", ".cache", "workbench")
+    return Path(os.path.expanduser(root)) / "meshes"
 
 
 #: Bump when a cached mesh's recipe changes (the key holds the recipe's arguments and netgen's version, not its code).
@@ -72,27 +73,32 @@ def cached_netgen(key: str, make):
     """
     import pickle
 
-    import netgen
-
-    tag = hashlib.sha256(f"{key}|netgen {netgen.__version__}|recipes {RECIPES}".encode()).hexdigest()[:24]
+    tag = _tag(key)
     name = f"netgen-{tag}.pickle"
-    for folder in (cache_folder(), _fallback_folder()):
-        payload = _checked(folder / name, tag)
-        if payload is not None:
-            try:
-                return pickle.loads(payload)
-            except Exception:  # (written by another netgen's pickling: make it again)
-                pass
+    folder = _writable(cache_folder())  # (the temporary folder only where the cache cannot be written: the user's own)
+    payload = _checked(folder / name, tag)
+    if payload is not None:
+        try:
+            return pickle.loads(payload)
+        except Exception:  # (written by another netgen's pickling: make it again)
+            pass
     mesh = make()
     payload = pickle.dumps(mesh)
     try:
-        path = _writable(cache_folder()) / name
+        path = folder / name
         tmp = path.with_name(f".{path.name}.{os.getpid()}")
         tmp.write_bytes(CACHE_MAGIC + f"{tag} {hashlib.sha256(payload).hexdigest()}\n".encode() + payload)
         os.replace(tmp, path)
     except OSError:  # (a folder that cannot be written at all only costs the time to make the mesh)
         pass
     return mesh
+
+
+def _tag(key: str) -> str:
+    """The cache's name for a mesh of ``key``, with netgen's version and :data:`RECIPES`."""
+    import netgen
+
+    return hashlib.sha256(f"{key}|netgen {netgen.__version__}|recipes {RECIPES}".encode()).hexdigest()[:24]
 
 
 #: The first line of a cached mesh file; the second holds the key's tag and the pickle's sha256.
@@ -121,7 +127,10 @@ def _fallback_folder() -> Path:
 
 
 def _writable(folder: Path) -> Path:
-    """``folder``, made; or, when it cannot be written, a folder in the temporary directory (with a warning)."""
+    """``folder``, made; or, when it cannot be written, a folder in the temporary directory (with a warning): the
+    user's own there (made 0700), or where another user made or can write that one, a new private folder (a mesh file
+    planted in a shared folder was read as the user's, and a pickle runs code: found by an outside pass)."""
+    import tempfile
     import warnings
 
     try:
@@ -132,9 +141,16 @@ def _writable(folder: Path) -> Path:
     except OSError as err:
         reason = err.strerror or str(err)
     fallback = _fallback_folder()
+    try:
+        for part in (fallback.parent, fallback):
+            part.mkdir(mode=0o700, exist_ok=True)
+            mode = part.lstat()
+            if part.is_symlink() or mode.st_uid != os.getuid() or mode.st_mode & 0o022:
+                raise PermissionError(f"{part} is not this user's alone")
+    except OSError:
+        fallback = Path(tempfile.mkdtemp(prefix="workbench-meshes-"))
     warnings.warn(f"the mesh cache {str(folder)!r} cannot be written ({reason}; set WORKBENCH_CACHE to a writable "
                   f"folder): meshes are stored in {str(fallback)!r}", RuntimeWarning, stacklevel=3)
-    fallback.mkdir(parents=True, exist_ok=True)
     return fallback
 
 

@@ -102,7 +102,10 @@ def atomic_write(path, writer) -> Path:
     as a folder named ``~``, the temporary went to the home folder through xarray and was left there)."""
     path = Path(path).expanduser()
     if path.is_symlink():  # (written through the link, as the shell's ``>`` does: it was replaced by a file, its
-        path = path.resolve()  # target keeping the old content, found by an outside pass)
+        try:  # target keeping the old content, found by an outside pass)
+            path = path.resolve()
+        except (OSError, RuntimeError):  # (a loop of links)
+            raise OSError(errno.ELOOP, "it is a symbolic link that loops", str(path)) from None
     if path.exists() and not path.is_file() and not path.is_dir():
         raise OSError(errno.EEXIST, "it exists and is not a regular file (a device, a pipe or a socket): it is not "
                                     "replaced", str(path))
@@ -169,6 +172,11 @@ def check_output(path, option: str, *, folder: bool = False) -> Path:
     if whole >= 4096:  # (PATH_MAX on Linux: the temporary beside it would not open)
         raise Unwritable(f"{option} {str(path)[:60]!r}...: the path is {whole} bytes long, more than the 4095 a "
                              "file system allows")
+    if path.is_symlink():
+        try:
+            path.resolve(strict=False)
+        except (OSError, RuntimeError):
+            raise Unwritable(f"{option} {str(path)!r} is a symbolic link that loops; give a file name") from None
     if path.exists() and not path.is_file() and not path.is_dir():
         raise Unwritable(f"{option} {str(path)!r} exists and is not a regular file (a device, a pipe or a socket); "
                              "give a file name")

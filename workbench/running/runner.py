@@ -428,6 +428,11 @@ class _Run:
                 kept = self.recorder.times[-1] if self.recorder.times else self.steps.t  # (a record cut: taken back)
                 failure.args = (f"{sc.name}: {failure.args[0] if failure.args else 'interrupted'}; its steps to t = "
                                 f"{kept:.6g} s are kept",)
+        with signals_held(drop=True):  # (the loop is over: a stop signal while the records became a Dataset or the
+            return self._finish(failure, scheme)  # state was captured lost a complete run, an outside pass)
+
+    def _finish(self, failure, scheme):
+        """The run's Dataset with the state to go on from, or ``failure`` raised with the records."""
         ds = self._records(failure) if self.world.root else None  # (several MPI processes: rank 0 holds them)
         if failure is not None:
             failure.dataset = ds
@@ -437,16 +442,17 @@ class _Run:
 
     def _records(self, failure):
         """The records' Dataset, after the loop ended as ``failure`` says (None: complete); None where an interrupt
-        left nothing to keep. Further Ctrl-Cs are dropped while it is made (a second one lost the run)."""
+        left nothing to keep."""
         status = "complete" if failure is None else "incomplete"
         try:
-            with signals_held(drop=True) if isinstance(failure, Interrupted) else contextlib.nullcontext():
-                try:
-                    return self.recorder.dataset(self.attrs(status, failure, self.clock.wall, self.clock.cpu))
-                except MemoryError:
-                    if not _drop_snapshots(self.recorder):
-                        raise
-                    return self.recorder.dataset(self.attrs(status, failure, self.clock.wall, self.clock.cpu))
+            try:
+                return self.recorder.dataset(self.attrs(status, failure, self.clock.wall, self.clock.cpu))
+            except MemoryError:
+                dropped = _drop_snapshots(self.recorder)
+                if not dropped:
+                    raise
+                return self.recorder.dataset(self.attrs(status, failure, self.clock.wall, self.clock.cpu)
+                                             | {"snapshots_dropped": dropped, "snapshots_dropped_units": "1"})
         except Exception:
             if not isinstance(failure, Interrupted):
                 raise
@@ -583,15 +589,16 @@ class _Run:
                               f"({why}); the run goes on", RuntimeWarning, stacklevel=3)
 
 
-def _drop_snapshots(recorder) -> bool:
+def _drop_snapshots(recorder) -> int:
     """Where the memory left cannot hold the field snapshots made into arrays (a run of many snapshots under a limit
     such as ``ulimit -v``, a scheduler's ``h_vmem``): drop them and keep the records, with a warning; a MemoryError
-    there lost every step after the run was done (found by an outside pass). False where there are none to drop."""
+    there lost every step after the run was done (found by an outside pass). How many: 0 where there are none; the
+    archive says so in ``snapshots_dropped``."""
     dropped = len(recorder.snaps)
     if not dropped:
-        return False
+        return 0
     recorder.snaps.clear()
     warnings.warn(f"out of memory while the {dropped} field snapshots were made into the archive: they are dropped, "
                   "the records of every step kept (ask for fewer snapshots, or for more memory)", RuntimeWarning,
                   stacklevel=4)
-    return True
+    return dropped

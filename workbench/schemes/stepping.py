@@ -663,7 +663,7 @@ class _BarThatMayLoseItsTerminal:
 def progress_bar(progress, **options):
     """tqdm's bar when one is shown (``progress``, or None: on a terminal), else a stand-in: tqdm's import (30 ms,
     with its monitor thread) is not paid by runs that show none."""
-    if not (sys.stderr.isatty() if progress is None else progress):
+    if sys.stderr is None or not (sys.stderr.isatty() if progress is None else progress):  # (None: started closed)
         return _NoBar()
     import importlib.util
 
