@@ -603,6 +603,19 @@ def test_snapshots_that_will_not_fit_in_memory_are_warned_about_before_the_run(m
         workbench.run(sc.with_(snapshots=()), progress=False)
 
 
+def test_the_memory_free_counts_an_address_space_limit():
+    """The memory checks before a run read the machine's MemAvailable alone: under ``ulimit -v`` (or a job's control
+    group) a run was planned as if it had the whole machine (an outside pass)."""
+    import resource
+
+    def limit():
+        resource.setrlimit(resource.RLIMIT_AS, (3 * 2**30, resource.getrlimit(resource.RLIMIT_AS)[1]))
+
+    p = subprocess.run([sys.executable, "-c", "from workbench.running.preflight import available_memory; "
+                        "print(available_memory())"], capture_output=True, text=True, preexec_fn=limit)
+    assert p.returncode == 0 and 0 < float(p.stdout) < 3 * 2**30, (p.stdout, p.stderr)
+
+
 def test_a_file_size_limit_is_named_when_the_archive_cannot_be_written(tmp_path):
     """Under ``ulimit -f`` the archive failed with netCDF's own words alone, "NetCDF: HDF error", as a full disk does
     (an outside pass): the limit is named now."""

@@ -18,6 +18,7 @@ from __future__ import annotations
 
 import math
 from dataclasses import dataclass
+from pathlib import Path
 
 import numpy as np
 
@@ -33,11 +34,44 @@ class Estimate:
 
 
 def available_memory() -> float:
-    """Bytes of memory available to a new allocation (Linux: MemAvailable), or infinity when unknown."""
+    """Bytes of memory available to a new allocation, or infinity when unknown (Linux): the least of the machine's
+    MemAvailable, what the process's control group (a Slurm job, a container: cgroup v2 memory.max) has left, and
+    what its address-space limit (``ulimit -v``) leaves beyond the process's size. MemAvailable alone let a run under
+    such a limit be planned as if it had the whole machine (found by an outside pass)."""
+    out = [_meminfo("/proc/meminfo", "MemAvailable:")]
     try:
-        with open("/proc/meminfo") as f:
+        with open("/proc/self/cgroup") as f:
+            groups = dict(line.strip().split(":", 2)[1:] for line in f if line.count(":") >= 2)
+    except OSError:
+        groups = {}
+    for key, folder, limit, used in (("", "", "memory.max", "memory.current"),  # (cgroup v2, then v1)
+                                     ("memory", "memory", "memory.limit_in_bytes", "memory.usage_in_bytes")):
+        if key not in groups:
+            continue
+        root = Path("/sys/fs/cgroup") / folder / groups[key].lstrip("/")
+        try:
+            most = (root / limit).read_text().strip()
+            if most != "max" and float(most) < 2.0 ** 60:  # (v1 says "no limit" with a number near 2^63)
+                out.append(float(most) - float((root / used).read_text()))
+        except (OSError, ValueError):
+            pass
+    try:
+        import resource
+
+        soft = resource.getrlimit(resource.RLIMIT_AS)[0]
+        if soft != resource.RLIM_INFINITY:
+            out.append(soft - _meminfo("/proc/self/status", "VmSize:"))
+    except (ImportError, OSError, ValueError):
+        pass
+    return max(0.0, min(out))
+
+
+def _meminfo(path: str, key: str) -> float:
+    """A ``key: N kB`` line of a /proc file, in bytes (infinity where absent)."""
+    try:
+        with open(path) as f:
             for line in f:
-                if line.startswith("MemAvailable:"):
+                if line.startswith(key):
                     return float(line.split()[1]) * 1024.0
     except OSError:
         pass
