@@ -336,3 +336,35 @@ def test_remesh_on_the_hemisphere():
                            space_goal="pressure", progress=False)
     assert ds.attrs["space_levels"] == 2 and base.attrs["ndof"] < ds.attrs["ndof"] <= 5000
     assert hertz.profile(ds)["l2"] < 0.6 * hertz.profile(base)["l2"]
+
+
+@pytest.mark.parametrize("where", ["while the next mesh is made", "in the next mesh's run"])
+def test_a_stop_signal_in_a_later_mesh_keeps_the_complete_ones(monkeypatch, where):
+    """A stop signal (Ctrl-C, SIGTERM) while the loop went on to a finer mesh lost every complete level, or kept only
+    the partial steps of the last (an outside pass: 11 levels complete to T dropped for 5 steps of the twelfth). The
+    last complete mesh's run is kept, with the levels before it, in workbench.Interrupted."""
+    from workbench.running import adapt
+    from workbench.schemes import stepping
+
+    if where == "while the next mesh is made":
+        def interrupted(*args):
+            raise workbench.errors.Interrupted("terminated (SIGTERM)", signal=15)
+
+        monkeypatch.setattr(adapt, "_next", interrupted)
+    else:
+        advance, runs = stepping._advance, []
+
+        def interrupted(scheme, steps, t_prev, t):
+            if t_prev == 0.0:
+                runs.append(t)
+            if len(runs) == 2 and t_prev >= 0.3:
+                raise KeyboardInterrupt
+            return advance(scheme, steps, t_prev, t)
+
+        monkeypatch.setattr(stepping, "_advance", interrupted)
+    with pytest.raises(KeyboardInterrupt) as err:
+        workbench.run("memory_hertz", h_contact=0.01, space_tol=0.01, progress=False)
+    ds = err.value.dataset
+    assert isinstance(err.value, workbench.errors.Interrupted) and "complete to T, is kept" in str(err.value)
+    assert ds.attrs["status"] == "complete" and ds.attrs["space_stop"] == "interrupted"
+    assert ds.sizes["level"] == 1 and float(ds.time[-1]) == pytest.approx(float(ds.attrs["T"]))

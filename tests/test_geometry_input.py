@@ -337,7 +337,7 @@ def test_the_mesh_cache_reads_only_the_users_own_folders(tmp_path, monkeypatch):
     (tmp_path / "file").write_text("")
     monkeypatch.setenv("WORKBENCH_CACHE", str(tmp_path / "file"))  # (cannot be written: the temporary folder ...)
     os.chmod(shared.parent, 0o777)  # (... which is not this user's alone: not read, a private one made)
-    with pytest.warns(RuntimeWarning, match="workbench-meshes-"):
+    with pytest.warns(RuntimeWarning, match="workbench-meshes-.*is not this user's alone.*chmod 700"):
         got = meshes.cached_netgen("planted", lambda: triangle(3))
     assert float(np.array(got.Coordinates())[2, 1]) == pytest.approx(1.0 / 3.0)
 

@@ -616,6 +616,28 @@ def test_the_memory_free_counts_an_address_space_limit():
     assert p.returncode == 0 and 0 < float(p.stdout) < 3 * 2**30, (p.stdout, p.stderr)
 
 
+def test_the_memory_free_counts_a_jobs_control_group_less_its_file_cache(tmp_path):
+    """A batch job's control group (cgroup v2, or v1) limits it below the machine's memory; its usage counts the
+    file cache the kernel gives back on demand, which is free memory to a run (an outside pass: 7.5 of 7.9 GiB used
+    were cache, and a run needing 0.4 GB was refused)."""
+    from workbench.running.preflight import available_memory
+
+    GiB = 2**30
+    for version, line, folder, files in (
+            ("v2", "0::/job", "job", {"memory.max": 8 * GiB, "memory.current": int(7.9 * GiB),
+                                      "memory.stat": f"anon 1\ninactive_file {int(7.5 * GiB)}\n"}),
+            ("v1", "4:memory:/job", "memory/job", {"memory.limit_in_bytes": 8 * GiB,
+                                                   "memory.usage_in_bytes": int(7.9 * GiB),
+                                                   "memory.stat": f"cache 2\ntotal_inactive_file {int(7.5 * GiB)}\n"})):
+        root = tmp_path / version
+        (root / folder).mkdir(parents=True)
+        for name, value in files.items():
+            (root / folder / name).write_text(f"{value}\n")
+        (root / "cgroup").write_text(line + "\n")
+        free = available_memory(str(root / "cgroup"), str(root))
+        assert free == pytest.approx(min(7.6 * GiB, available_memory("/nonexistent")), rel=1e-9), version
+
+
 def test_a_file_size_limit_is_named_when_the_archive_cannot_be_written(tmp_path):
     """Under ``ulimit -f`` the archive failed with netCDF's own words alone, "NetCDF: HDF error", as a full disk does
     (an outside pass): the limit is named now."""

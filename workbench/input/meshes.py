@@ -140,17 +140,19 @@ def _writable(folder: Path) -> Path:
         reason = "no permission to write there"
     except OSError as err:
         reason = err.strerror or str(err)
-    fallback = _fallback_folder()
+    fallback, shared = _fallback_folder(), ""
     try:
         for part in (fallback.parent, fallback):
             part.mkdir(mode=0o700, exist_ok=True)
             mode = part.lstat()
             if part.is_symlink() or mode.st_uid != os.getuid() or mode.st_mode & 0o022:
-                raise PermissionError(f"{part} is not this user's alone")
+                shared = (f"; {str(part)!r} is not this user's alone (a link, another's, or writable by others: "
+                          "chmod 700 it, or remove it), so each run makes a new folder")
+                raise PermissionError(shared)
     except OSError:
         fallback = Path(tempfile.mkdtemp(prefix="workbench-meshes-"))
     warnings.warn(f"the mesh cache {str(folder)!r} cannot be written ({reason}; set WORKBENCH_CACHE to a writable "
-                  f"folder): meshes are stored in {str(fallback)!r}", RuntimeWarning, stacklevel=3)
+                  f"folder): meshes are stored in {str(fallback)!r}{shared}", RuntimeWarning, stacklevel=3)
     return fallback
 
 

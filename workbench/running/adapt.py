@@ -171,29 +171,52 @@ def displacement_dofs(ngmesh, geometry, order: int) -> int:
 def run(make_job, model, numerics, execute_args: tuple):
     """The adaptive loop (module docs): ``make_job(model)`` builds a run of the model (a runner ``_Run`` that
     estimates), ``execute_args`` are its ``execute``'s arguments. Returns the final run's Dataset."""
-    levels, ds = [], None
+    levels, ds, done = [], None, None  # (done: the last mesh's run, complete to T, and its body)
     while True:
-        job = make_job(model)
-        ds = job.execute(*execute_args)
+        try:
+            job = make_job(model)
+            ds = job.execute(*execute_args)
+        except KeyboardInterrupt as err:
+            if done is None:
+                raise
+            raise _kept(err, done, levels) from None
         scale = job.largest_norm if job.largest_norm > 0 else 1.0  # (the estimates relative to the largest norm)
         ds["space_error_estimate"] = ds.space_error_estimate / scale
         ds["space_indicator"] = ("cell", np.sqrt(job.indicators) / scale, {
             "units": "1", "long_name": "the element's largest error indicator over the run (both parts), relative "
             "to the largest energy norm of u: what marking used"})
         levels.append((job.disc.ndof, job.space_estimate / scale, ds.attrs["setup_time"] + ds.attrs["wall_time"]))
+        done = (ds, model.geometry)
         stop = _stop(levels, numerics)
         if stop:
             break
-        geometry = _next(model.geometry, job.marked, numerics)
-        if displacement_dofs(geometry.adapted_mesh, geometry, numerics.order) > numerics.max_dofs:
-            stop = "max_dofs"
-            break
+        try:
+            geometry = _next(model.geometry, job.marked, numerics)
+            if displacement_dofs(geometry.adapted_mesh, geometry, numerics.order) > numerics.max_dofs:
+                stop = "max_dofs"
+                break
+        except KeyboardInterrupt as err:
+            raise _kept(err, done, levels) from None
         model = dataclasses.replace(model, geometry=geometry)
     if stop != "met":
         warnings.warn(f"space_tol = {numerics.space_tol:g} not met: the estimate is {levels[-1][1]:.3g} at "
                       f"{levels[-1][0]} dofs ({'max_dofs' if stop == 'max_dofs' else f'{MAX_LEVELS} meshes'} "
                       "reached)", RuntimeWarning, stacklevel=4)
     return _with_levels(ds, levels, stop, model.geometry)
+
+
+def _kept(err, done, levels) -> Exception:
+    """A stop signal while the loop went on to a finer mesh: Interrupted with the last mesh's run, complete to T, and
+    the levels before (a signal there lost every complete level, or kept the partial steps of the last alone: found
+    by an outside pass)."""
+    from ..discrete.world import stopped_by
+    from ..errors import Interrupted
+
+    ds, body = done
+    signal = err.signal if isinstance(err, Interrupted) else 2
+    return Interrupted(f"{ds.attrs['scene']}: {stopped_by(signal)} while the adaptive loop went on to mesh "
+                       f"{len(levels)}; the run on mesh {len(levels) - 1} ({levels[-1][0]} dofs), complete to T, is "
+                       "kept", dataset=_with_levels(ds, levels, "interrupted", body), signal=signal)
 
 
 def _next(body, marked: np.ndarray, numerics):

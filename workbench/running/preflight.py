@@ -4,7 +4,7 @@
 the element order, and the memory of the factorisation of the constant matrix
 (banded Cholesky after RCM on thin structured meshes, nested-dissection-like fill
 otherwise, calibrated on measured runs), and refuses a run that cannot fit in the
-memory this machine has free, naming h and the numbers. :func:`warnings_for` gives
+memory free to the process (the machine's, its job's, ulimit -v's), naming h and the numbers. :func:`warnings_for` gives
 the warnings that belong to the scene itself (P1 simplices on a thin body lock).
 
 Examples
@@ -33,14 +33,15 @@ class Estimate:
     bytes: float
 
 
-def available_memory() -> float:
+def available_memory(cgroups: str = "/proc/self/cgroup", cgroup_root: str = "/sys/fs/cgroup") -> float:
     """Bytes of memory available to a new allocation, or infinity when unknown (Linux): the least of the machine's
     MemAvailable, what the process's control group (a Slurm job, a container: cgroup v2 memory.max) has left, and
     what its address-space limit (``ulimit -v``) leaves beyond the process's size. MemAvailable alone let a run under
-    such a limit be planned as if it had the whole machine (found by an outside pass)."""
+    such a limit be planned as if it had the whole machine (found by an outside pass). ``cgroups`` and
+    ``cgroup_root``: where the process's groups and their files are read (the system's)."""
     out = [_meminfo("/proc/meminfo", "MemAvailable:")]
     try:
-        with open("/proc/self/cgroup") as f:
+        with open(cgroups) as f:
             groups = dict(line.strip().split(":", 2)[1:] for line in f if line.count(":") >= 2)
     except OSError:
         groups = {}
@@ -48,11 +49,16 @@ def available_memory() -> float:
                                      ("memory", "memory", "memory.limit_in_bytes", "memory.usage_in_bytes")):
         if key not in groups:
             continue
-        root = Path("/sys/fs/cgroup") / folder / groups[key].lstrip("/")
+        root = Path(cgroup_root) / folder / groups[key].lstrip("/")
         try:
             most = (root / limit).read_text().strip()
             if most != "max" and float(most) < 2.0 ** 60:  # (v1 says "no limit" with a number near 2^63)
-                out.append(float(most) - float((root / used).read_text()))
+                # the usage less the file cache the kernel gives back on demand (counted, a job whose files were
+                # read looked full: found by an outside pass), as `docker stats` counts it
+                stat = dict(line.split() for line in (root / "memory.stat").read_text().splitlines()
+                            if len(line.split()) == 2)
+                cache = float(stat.get("inactive_file", stat.get("total_inactive_file", 0.0)))
+                out.append(float(most) - (float((root / used).read_text()) - cache))
         except (OSError, ValueError):
             pass
     try:
@@ -122,7 +128,7 @@ def resources(scene, model, n_steps: int, processes: int = 1) -> None:
         which = "h" if not any(scene.values.get(n, 0) for n in model.geometry.cell_names) else "nx/ny/nz"
         raise ParameterError(f"{which} = {scene['h']:g} (order {scene['order']}) gives about {est.ndof:.2g} "
                              f"displacement dofs; assembling and factoring them needs about {est.bytes / 2**30:.3g} GB, "
-                             f"more than the {free / 2**30:.3g} GB this machine has free: use a larger h or a lower "
+                             f"more than the {free / 2**30:.3g} GB free to this process: use a larger h or a lower "
                              "order" + ("" if not iterative or scene["solver"] == "cg" else
                                         ", or solver = 'cg' (no factor)"))
 
@@ -139,8 +145,8 @@ def _snapshot_memory(scene, geometry, ndof: int, free: float) -> None:
         import warnings
 
         warnings.warn(f"snapshots: the {count} field snapshots hold about {count * each / 2**30:.3g} GB until the "
-                      f"archive is made, and twice that while it is, more than the {free / 2**30:.3g} GB this "
-                      "machine has free: ask for fewer (what does not fit is dropped at the end, the records kept)",
+                      f"archive is made, and twice that while it is, more than the {free / 2**30:.3g} GB free to this "
+                      "process: ask for fewer (what does not fit is dropped at the end, the records kept)",
                       RuntimeWarning, stacklevel=5)
 
 
