@@ -940,3 +940,15 @@ def test_the_code_digest_skips_an_editors_files(tmp_path):
     p = subprocess.run([sys.executable, "-c", "from workbench.output.results import code_digest; print(code_digest())"],
                        capture_output=True, text=True, env=dict(os.environ, PYTHONPATH=str(tmp_path)), cwd=tmp_path)
     assert p.returncode == 0 and p.stdout.strip() == results.code_digest(), p.stderr
+
+
+def test_a_cases_warnings_are_one_line_each(tmp_path):
+    """Warnings from a study's worker processes came as Python prints them, the file, line and source line around
+    the message (an outside pass); they are one ``warning:`` line each, as the command line's own."""
+    p = subprocess.run([sys.executable, "-m", "workbench.cli", "study", "slab", "--h", "0.2", "0.1", "--k", "0.01",
+                        "--set", "T=0.02", "--workers", "1", "--no-progress", "-o", "s.nc"], cwd=tmp_path,
+                       capture_output=True, text=True, timeout=600)
+    assert p.returncode == 0, p.stderr
+    lines = [line for line in p.stderr.splitlines() if line.strip()]
+    assert any(line.startswith("warning: slab: P1 elements on a thin body") for line in lines), p.stderr
+    assert all(line.startswith("warning: ") for line in lines) and "RuntimeWarning" not in p.stderr, p.stderr

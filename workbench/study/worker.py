@@ -17,8 +17,11 @@ import traceback
 
 
 def main() -> None:
+    import warnings
+
     channel = os.fdopen(os.dup(1), "wb")
     os.dup2(2, 1)  # prints inside a run go to stderr, never into the channel
+    warnings.showwarning = _one_line
     stdin = sys.stdin.buffer
     from .execute import read_frame, run_case, write_frame
 
@@ -32,6 +35,15 @@ def main() -> None:
         except BaseException:  # any failure goes back to the parent, which reports it with the case
             reply = ("error", traceback.format_exc())
         write_frame(channel, reply)
+
+
+def _one_line(message, category, filename, lineno, file=None, line=None) -> None:
+    """A case's warning as the command line shows one, ``warning: ...`` on one line (Python's own gave the file, the
+    line number and the source line, once per case: found by an outside pass)."""
+    try:
+        print("warning: " + " ".join(str(message).split()), file=sys.stderr)
+    except (OSError, ValueError):
+        pass
 
 
 if __name__ == "__main__":
