@@ -282,5 +282,7 @@ def test_a_second_ctrl_c_does_not_lose_the_archive(tmp_path, gap):
         p.kill()
     assert p.returncode == 130 and "Traceback" not in err, (p.returncode, err)
     ds = workbench.load(tmp_path / "x.stopped.nc")  # (beside the checkpoint, which keeps the state to go on from)
-    assert ds.attrs["status"] == "incomplete" and ds.sizes["time"] > 1
+    # (the steps it took, not its records: 20 s of steps are recorded every tenth, so a Ctrl-C soon after the first
+    # checkpoint, as on a loaded machine, finds t = 0 alone recorded)
+    assert ds.attrs["status"] == "incomplete" and ds.attrs["steps_taken"] >= 5
     assert workbench.load(out).attrs["status"] == "checkpoint"
