@@ -4,8 +4,9 @@
 the element order, and the memory of the factorisation of the constant matrix
 (banded Cholesky after RCM on thin structured meshes, nested-dissection-like fill
 otherwise, calibrated on measured runs), and refuses a run that cannot fit in the
-memory free to the process (the machine's, its job's, ulimit -v's), naming h and the numbers. :func:`warnings_for` gives
-the warnings that belong to the scene itself (P1 simplices on a thin body lock).
+memory free to the process (the machine's, its job's, ulimit -v's), naming h and the
+numbers. :func:`warnings_for` gives the warnings that belong to the scene itself (P1
+simplices on a thin body lock).
 
 Examples
 --------
@@ -64,9 +65,9 @@ def available_memory(cgroups: str = "/proc/self/cgroup", cgroup_root: str = "/sy
     try:
         import resource
 
-        soft = resource.getrlimit(resource.RLIMIT_AS)[0]
-        if soft != resource.RLIM_INFINITY:
-            out.append(soft - _meminfo("/proc/self/status", "VmSize:"))
+        soft, size = resource.getrlimit(resource.RLIMIT_AS)[0], _meminfo("/proc/self/status", "VmSize:")
+        if soft != resource.RLIM_INFINITY and math.isfinite(size):  # (no /proc: the limit alone tells nothing)
+            out.append(soft - size)
     except (ImportError, OSError, ValueError):
         pass
     return max(0.0, min(out))
