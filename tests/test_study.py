@@ -908,10 +908,23 @@ def test_a_study_without_a_folder_leaves_none(tmp_path, monkeypatch):
         folder.mkdir()
         (folder / "case.nc").write_bytes(b"x")
     os.utime(folders["workbench-study-old_name"], (time.time() - 2 * 86400,) * 2)
-    ds = Study("tp1", k=[0.04, 0.02], workers=0).run(progress=False)
+    # a study's lock tells more than its process number (another PID namespace sharing /tmp): one held is kept
+    # whatever its name's number, one left unlocked goes
+    import fcntl
+
+    held, left = tmp_path / f"workbench-study-{dead}-held", tmp_path / f"workbench-study-{os.getppid()}-left"
+    for folder in (held, left):
+        folder.mkdir()
+        (folder / ".alive").write_text("")
+    lock = open(held / ".alive")
+    fcntl.flock(lock, fcntl.LOCK_EX)
+    try:
+        ds = Study("tp1", k=[0.04, 0.02], workers=0).run(progress=False)
+    finally:
+        lock.close()
     assert np.isfinite(ds.error.values).all()
     assert sorted(p.name for p in tmp_path.glob("workbench-study-*")) == \
-        sorted([f"workbench-study-{os.getppid()}-cd", "workbench-study-new_name"])
+        sorted([f"workbench-study-{os.getppid()}-cd", "workbench-study-new_name", held.name])
 
 
 def test_a_resumed_study_counts_the_time_of_the_cases_it_ran_alone(tmp_path):

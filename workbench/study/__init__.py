@@ -179,6 +179,9 @@ class Study:
             return self._run_in(archive, progress, extend)
         finally:
             if temporary:
+                held = _HELD.pop(str(archive), None)
+                if held is not None:
+                    held.close()
                 shutil.rmtree(archive, ignore_errors=True)
 
     def _run_in(self, archive: Path, progress, extend: bool) -> xr.Dataset:
@@ -310,15 +313,49 @@ def _archive_folder(archive) -> Path:
     if archive is None:
         _remove_stale_folders()
         archive = Path(tempfile.mkdtemp(prefix=f"workbench-study-{os.getpid()}-"))
+        _HELD[str(archive)] = _hold(archive)
     archive = Path(archive).expanduser()
     archive.mkdir(parents=True, exist_ok=True)
     return archive
 
 
+#: The lock files of this process's temporary case folders (:func:`_hold`), open while their studies run.
+_HELD: dict = {}
+
+
+def _hold(folder: Path):
+    """A lock on ``folder/.alive`` for as long as the returned file is open: how another study tells this one is
+    running, from any PID namespace sharing the folder (its process number alone told a study in another namespace
+    gone: found by an outside pass); None where the system has no such locks."""
+    try:
+        import fcntl
+    except ImportError:
+        return None
+    f = open(folder / ".alive", "w")
+    fcntl.flock(f, fcntl.LOCK_EX)
+    return f
+
+
+def _unheld(folder: Path):
+    """Whether ``folder``'s study is gone by its lock (True, False), or None where it has none."""
+    try:
+        import fcntl
+
+        with open(folder / ".alive") as f:
+            try:
+                fcntl.flock(f, fcntl.LOCK_EX | fcntl.LOCK_NB)
+            except BlockingIOError:
+                return False
+            return True
+    except (ImportError, OSError):
+        return None
+
+
 def _remove_stale_folders() -> None:
     """Remove the temporary case folders of studies whose process is gone: a study killed (SIGTERM in a batch job,
     kill -9) left its folder behind, with its cases, which no later study reads (an outside pass found 1500 of them,
-    1.4 GB). Folders named without a process (older versions) go once they are a day old."""
+    1.4 GB). A study holds a lock in its folder while it runs (:func:`_hold`); a folder without one goes where the
+    process in its name is gone, or, named without a process (older versions), once it is a day old."""
     import re
     import shutil
     import time
@@ -333,7 +370,10 @@ def _remove_stale_folders() -> None:
     for entry in entries:
         m = re.fullmatch(r"workbench-study-(\d+)-\w+", entry.name)
         try:
-            if m is not None:
+            stale = _unheld(entry)
+            if stale is not None:
+                pass
+            elif m is not None:
                 stale = int(m.group(1)) != os.getpid() and not _alive(int(m.group(1)))
             else:
                 stale = time.time() - entry.stat().st_mtime > 86400.0
