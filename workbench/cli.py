@@ -713,13 +713,13 @@ def main(argv=None) -> int:
 def _utf8_arguments(argv) -> None:
     """Refuse an argument holding bytes that are not UTF-8 (a name typed in another encoding): in an expression it
     ended in a UnicodeEncodeError traceback, in a path after the run, with its archive lost (an outside pass)."""
+    from .values import not_utf8
+
     for arg in argv:
-        try:
-            arg.encode("utf-8")
-        except UnicodeEncodeError:
-            shown = arg.encode("utf-8", "backslashreplace").decode("utf-8")
+        shown = not_utf8(arg)
+        if shown is not None:
             raise ParameterError(f"the argument '{shown}' holds bytes that are not UTF-8 (typed or named in another "
-                                 "encoding): give it in UTF-8, or rename the file or folder it names") from None
+                                 "encoding): give it in UTF-8, or rename the file or folder it names")
 
 
 def _one_case_per_launch(command: str) -> None:

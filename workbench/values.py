@@ -266,6 +266,20 @@ def check_threads(value, name: str):
     return value
 
 
+def not_utf8(text: str):
+    """``text`` with its bytes that are not UTF-8 escaped (as Python reads them from a name in another encoding:
+    lone surrogates), or None where it is UTF-8.
+
+    >>> not_utf8("Dämpfer"), not_utf8("D" + chr(0xDCE4) + "mpfer")
+    (None, 'D\\\\udce4mpfer')
+    """
+    try:
+        text.encode("utf-8")
+        return None
+    except UnicodeEncodeError:
+        return text.encode("utf-8", "backslashreplace").decode("utf-8")
+
+
 def check_utf8_path(path, what: str) -> None:
     """Refuse a path whose absolute form holds bytes that are not UTF-8 (a folder named in Latin-1 on an old system,
     a share, a zip file): netCDF takes its paths and attributes as UTF-8, so the run was done and its archive lost,
@@ -279,11 +293,8 @@ def check_utf8_path(path, what: str) -> None:
     ...     print(str(err).split("': ")[1].split(' (')[0])
     its path holds bytes that are not UTF-8
     """
-    full = os.path.abspath(os.path.expanduser(str(path)))
-    try:
-        full.encode("utf-8")
-    except UnicodeEncodeError:
-        shown = full.encode("utf-8", "backslashreplace").decode("utf-8")
+    shown = not_utf8(os.path.abspath(os.path.expanduser(str(path))))
+    if shown is not None:
         raise ParameterError(f"{what} '{shown}': its path holds bytes that are not UTF-8 (a name made in another "
                              "encoding); netCDF takes UTF-8 paths only: rename the file or the folder it is "
                              "in") from None
