@@ -383,3 +383,13 @@ def test_reproduce_all_checks_every_problem_before_running_any(capsys, tmp_path)
     _one_error(*_cli(capsys, "reproduce", "all", "--set", "a=2", "--no-side", "--out", str(out)),
                "tp4: unknown parameter 'a'")
     assert not out.exists() or not any(out.iterdir())
+
+
+def test_reproduce_all_refuses_a_step_above_a_later_problems_stability_limit_before_running_any(capsys, tmp_path):
+    """``reproduce all --k 0.5``: tp1-tp3 (rods, k_crit = 2 s) ran and were written before tp4's explicit step was
+    found above its stability limit (k_crit = 0.052 s), which needs the slab's matrices: each problem's scheme is now
+    set up and checked, with no step, before the first runs."""
+    out = tmp_path / "rep"
+    _one_error(*_cli(capsys, "reproduce", "all", "--k", "0.5", "--no-side", "--out", str(out)),
+               "tp4: k = ", "exceeds the predicted stability limit", "k_crit = 0.052")
+    assert not out.exists() or not any(out.iterdir())

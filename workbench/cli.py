@@ -565,9 +565,9 @@ def cmd_reproduce(args) -> int:
     check_output(args.out, "--out", folder=True)
     overrides = _overrides(args, swept=("h", "k"))
     problems = reproduction.PROBLEMS if args.problem == "all" else (args.problem,)
-    for problem in problems:  # (every problem's values checked first: tp1-tp3 were written before tp4 refused one)
+    for problem in problems:  # (every problem checked first, its k_crit too: tp1-tp3 were written before tp4 refused)
         try:
-            reproduction.problem_scene(problem, args.h, args.k, **overrides)
+            reproduction.check(problem, args.h, args.k, **overrides)
         except ParameterError as err:
             raise ParameterError(f"{problem}: {err}") from None
     code = 0

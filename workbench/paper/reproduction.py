@@ -140,6 +140,20 @@ def problem_scene(problem, h=None, k=None, **overrides):
     return workbench.scene(problem, **sizes, **overrides)
 
 
+def check(problem, h=None, k=None, **overrides) -> None:
+    """Refuse what :func:`reproduce` would refuse, before any run: the scene's values and those that need the
+    body's matrices (the explicit scheme's stability limit, :func:`workbench.running.runner.checks`), with no step.
+
+    >>> check("tp4", k=0.1)  # doctest: +ELLIPSIS
+    Traceback (most recent call last):
+    ...
+    workbench.errors.StepTooLarge: k = 0.1 s exceeds the predicted stability limit of the explicit scheme, ...
+    """
+    from workbench.running.runner import checks
+
+    checks(problem_scene(problem, h, k, **overrides))
+
+
 def changed_from_paper(scene) -> dict:
     """The values of ``scene`` that make it another problem than the paper's, ``{name: (paper's, this run's)}``:
     what the user set, other than the discretisation (:data:`workbench.input.numerics.DISCRETISATION`) and the

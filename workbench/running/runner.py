@@ -110,6 +110,31 @@ def run(scene=None, *, restart=None, checkpoint=None, progress=None, record_time
         return _driver(numerics)(job, model, numerics, (grid, sync, record_times, limit))
 
 
+def checks(scene=None, *, threads=None, model=None, **overrides) -> dict:
+    """The refusals of :func:`run` for the same arguments, without a step: the scene's, and those that need the
+    body's matrices (the explicit scheme's stability limit, at u0 and one trial step on). Returns the scheme's
+    checks (``k_crit`` for the explicit scheme). Several runs checked this way before the first starts are
+    refused before any work (``workbench reproduce all``: a k too large for tp4 had been found after tp1-tp3 ran).
+
+    >>> round(checks("tp4", h=0.05, k=0.01)["k_crit"], 3)
+    0.052
+    >>> checks("tp4", h=0.05, k=0.1)  # doctest: +ELLIPSIS
+    Traceback (most recent call last):
+    ...
+    workbench.errors.StepTooLarge: k = 0.1 s exceeds the predicted stability limit of the explicit scheme, ...
+    """
+    _check_options(overrides, None, None, threads)
+    _check_objects(record_times=None, times=None, model=model, restart=None)
+    sc, _ = _scene_and_archive(scene, None, overrides, model)
+    numerics = numerics_of.from_scene(sc, threads)
+    grid, sync, _ = _grid(sc, numerics, None, None, None)
+    model, world = model or sc.model_of(), parallel.world()
+    parallel.check(sc, model, numerics)
+    preflight.refusals(sc, model, numerics, grid, None, processes=world.size)
+    with blas_single_threaded():
+        return _Run(sc, model, numerics, world, call="").set_up(grid, sync)[1].checks
+
+
 def _driver(numerics):
     """The run of a model on the mesh as given, or adapted by repeating the run, or during it (``space_adapt``)."""
     if numerics.space_tol <= 0:
@@ -381,11 +406,9 @@ class _Run:
                              order=scheme.order, sync=sync, admissible=scheme.admissible_step, kinks=kinks,
                              loads=loads)
 
-    def execute(self, grid, sync, record_times, limit):
-        """Set up, step from 0 (or the archive's time) to T, and return the Dataset (None on ranks other than 0);
-        a run that diverges raises with the Dataset of what it computed."""
+    def set_up(self, grid, sync):
+        """The discretisation and the scheme, with the scheme's checks before its first step (:func:`checks`)."""
         sc, n = self.sc, self.numerics
-        self.record_times = record_times  # (kept in the archive: a continuation records at the same times)
         with results.Clock() as setup, task_manager(n.threads), _naming_extremes(sc):
             self.disc = disc = parallel.discretise(self.model, sc, n)  # (threads: the factorisations use them too)
             self.scheme = scheme = scheme_class(n.scheme)(disc)
@@ -396,6 +419,14 @@ class _Run:
                 self.steps = FixedSteps(grid)
                 self.checks = scheme.preflight(self.steps.k_max)
         self.setup_time = setup.wall
+        return disc, scheme
+
+    def execute(self, grid, sync, record_times, limit):
+        """Set up, step from 0 (or the archive's time) to T, and return the Dataset (None on ranks other than 0);
+        a run that diverges raises with the Dataset of what it computed."""
+        sc, n = self.sc, self.numerics
+        self.record_times = record_times  # (kept in the archive: a continuation records at the same times)
+        disc, scheme = self.set_up(grid, sync)
         # (an error-controlled run resolves debonding by its own steps: the fixed-step resolution warning is moot)
         for message in preflight.warnings_for(sc, self.model, self.checks) + ([] if n.adaptive else scheme.warnings()):
             warnings.warn(message, RuntimeWarning, stacklevel=4)
