@@ -509,6 +509,37 @@ def test_a_signal_after_the_last_step_does_not_lose_the_run(tmp_path, signum):
     assert workbench.load(tmp_path / "a.nc").attrs["status"] == "complete"
 
 
+_SIGNALLED_ON_THE_WAY_BACK = """
+import os, sys
+from workbench.running.threads import lean_process
+lean_process()
+from workbench.cli import console
+from workbench.running import runner
+once, SIGNAL = runner._once, int(sys.argv.pop(1))
+
+def signalled(*args):
+    ds = once(*args)
+    os.kill(os.getpid(), SIGNAL)  # (the run's hold on signals is over: the Dataset is on its way to the command)
+    return ds
+
+runner._once = signalled
+sys.exit(console())
+"""
+
+
+@pytest.mark.parametrize("signum", [2, 15])
+def test_a_signal_after_the_run_returned_does_not_lose_it(tmp_path, signum):
+    """Between the end of the run's own hold on stop signals and the command's (the Dataset on its way back through
+    the calls, 0.2 ms on tp4) a stop signal lost the complete run: "error: interrupted", no archive. The command now
+    holds each finished run (``world.keep_finished``) and writes it, saying the signal came after the run, with the
+    signal's exit code."""
+    p = subprocess.run([sys.executable, "-c", _SIGNALLED_ON_THE_WAY_BACK, str(signum), "run", "tp1", *RUN_TINY, "-o",
+                        "a.nc"], cwd=tmp_path, capture_output=True, text=True)
+    assert p.returncode == 128 + signum and "Traceback" not in p.stderr, p.stderr
+    assert "after the run had completed: its results are kept" in p.stderr, p.stderr
+    assert workbench.load(tmp_path / "a.nc").attrs["status"] == "complete"
+
+
 def test_a_run_whose_messages_cannot_be_shown_still_writes_its_archive(tmp_path):
     """The status line was printed before the archive was written: a log on a full disk (or a reader of the pipe that
     left, a terminal gone, a locale that cannot encode the scene's name) lost the whole run to an OSError or a

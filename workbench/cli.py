@@ -274,9 +274,11 @@ def cmd_run(args) -> int:
         from .input.scenes import scene
 
         _not_an_input(args, scene(args.scene, **overrides))
+    from .discrete.world import keep_finished
     from .running.runner import run
 
     _first_signal_stops()
+    kept = keep_finished()  # (a stop signal just after the run's end, its Dataset on its way here: written still)
     try:
         # -o is also where checkpoints go (checkpoint_every): a killed run goes on with the same command + --restart
         ds = run(args.scene, restart=args.restart, checkpoint=args.output,
@@ -290,13 +292,27 @@ def cmd_run(args) -> int:
     except Interrupted as err:  # (Ctrl-C, SIGTERM: the steps before are written as a diverged run's are)
         if err.dataset is None and _other_rank():  # (several MPI processes: rank 0 has the result and says it)
             return 128 + err.signal
-        if err.dataset is None:
-            raise
-        _say(_one_line(f"error: {err}"), sys.stderr)
-        ds, code = err.dataset, 128 + err.signal
+        ds, code = _stopped_after(err, kept) if err.dataset is None else (err.dataset, 128 + err.signal)
+        if err.dataset is not None:
+            _say(_one_line(f"error: {err}"), sys.stderr)
+    except KeyboardInterrupt as err:
+        ds, code = _stopped_after(err, kept)
     if ds is None:  # (several MPI processes: rank 0 holds the result and writes it)
         return code
     return _write_run(args, ds, code)
+
+
+def _stopped_after(err, kept: list):
+    """(the run's Dataset, the exit code) for a stop signal that came after the run had finished (``kept``:
+    :func:`~workbench.discrete.world.keep_finished`), before its archive was written; ``err`` raised again where no
+    run had finished (the signal stopped the setup: nothing computed)."""
+    from .discrete.world import stopped_by
+
+    if not kept:
+        raise err
+    signum = err.signal if isinstance(err, Interrupted) else 2
+    _say(f"error: {stopped_by(signum)} after the run had completed: its results are kept\n", sys.stderr)
+    return kept[-1], 128 + signum
 
 
 def _not_an_input(args, sc) -> None:

@@ -112,6 +112,25 @@ def stop_requested() -> int:
     return _STOP[0]
 
 
+#: The command line's hold on the last run finished in this process (:func:`keep_finished`).
+_FINISHED = {"keep": False, "runs": []}
+
+
+def keep_finished() -> list:
+    """From now on, each run that finishes in this process (:func:`finished`) is kept in the list returned, the last
+    one alone: the command line's own, so that a stop signal in the instants between the run's end and its archive
+    being written (its Dataset on its way back through the calls) does not lose a complete run. A Python session
+    keeps its result itself, and nothing is held for it."""
+    _FINISHED["keep"] = True
+    return _FINISHED["runs"]
+
+
+def finished(ds) -> None:
+    """A run's complete Dataset, made while the stop signals were held (:func:`keep_finished`)."""
+    if _FINISHED["keep"] and ds is not None:
+        _FINISHED["runs"][:] = [ds]
+
+
 @contextlib.contextmanager
 def signals_held(drop: bool = False):
     """The stop signals (:func:`stop_signals`) held inside (the main thread's): delivered when the block ends, or dropped

@@ -20,7 +20,7 @@ from pathlib import PurePath
 import numpy as np
 
 from .. import parallel
-from ..discrete.world import signals_held
+from ..discrete.world import finished, signals_held
 from ..errors import Diverged, Interrupted, ParameterError
 from ..expressions import Expression
 from ..input import numerics as numerics_of
@@ -469,7 +469,9 @@ class _Run:
             failure.dataset = ds
             raise failure
         state = restarts.capture(scheme, self.steps, self.recorder)  # (several MPI processes: every rank)
-        return restarts.attach(ds, state) if self.world.root else None
+        ds = restarts.attach(ds, state) if self.world.root else None
+        finished(ds)  # (the command line's: kept should a stop signal come before the archive is written)
+        return ds
 
     def _records(self, failure):
         """The records' Dataset, after the loop ended as ``failure`` says (None: complete); None where an interrupt
