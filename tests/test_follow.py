@@ -387,3 +387,20 @@ def test_a_continuation_from_a_checkpoint_is_the_run_straight_through(tmp_path, 
         path = tmp_path / "repeat.nc"
         workbench.write(workbench.run("memory_hertz", h_contact=0.01, space_tol=0.2, T=0.5, progress=False), path)
         workbench.run(restart=path, T=1.0, progress=False)
+
+
+def test_a_continuation_that_refines_no_further_can_be_continued_again(tmp_path):
+    """A run continued from a 'during' archive kept its mesh only where the continuation itself refined: the archive
+    of a continuation on the archive's last mesh had no ``adapted_mesh``, so continuing it again was refused as "an
+    archive of another workbench version", and its ``space_indicator`` held only the indicators since the restart
+    (2.5 % off the straight run's; an outside pass). Continued twice, T = 0.2 -> 0.25 -> 0.3, it now equals the run
+    straight to 0.3."""
+    kw = dict(h=0.1, scheme="implicit", space_tol=0.2, space_adapt="during", progress=False)
+    workbench.write(workbench.run("tp4", T=0.2, **kw), tmp_path / "a.nc")
+    workbench.write(workbench.run(restart=tmp_path / "a.nc", T=0.25, progress=False), tmp_path / "b.nc")
+    chained = workbench.run(restart=tmp_path / "b.nc", T=0.3, progress=False)
+    straight = workbench.run("tp4", T=0.3, **kw)
+    assert straight.attrs["space_refinements"] > 0 and "adapted_mesh" in chained
+    assert str(chained.adapted_mesh.values) == str(straight.adapted_mesh.values)
+    for name in ("u_probe", "u_dofs", "beta", "space_indicator", "space_error_estimate", "ndof", "refinement_time"):
+        np.testing.assert_array_equal(chained[name].values, straight[name].values, err_msg=name)

@@ -806,6 +806,12 @@ def on_mesh(body: Geometry, ngmesh) -> Geometry:
     return out
 
 
+def adapted_mesh(body: Geometry):
+    """The netgen mesh ``body`` was put on (:func:`on_mesh`: by an adaptive run, or read from its archive), or None
+    for a body on the mesh it makes itself."""
+    return body.adapted_mesh if isinstance(body, _OnMesh) else None
+
+
 def of_run(body: Geometry, ds) -> Geometry:
     """The body a run was computed on: ``body`` (the scene's), on the run's adapted mesh where the run refined it
     (``space_tol > 0``; the archive's ``adapted_mesh``)."""

@@ -45,7 +45,7 @@ import numpy as np
 import xarray as xr
 
 from ..errors import Diverged
-from ..input.geometry import on_mesh
+from ..input.geometry import adapted_mesh, on_mesh
 from ..input.meshes import from_text, to_text
 from ..output.results import ugrid_mesh
 from . import adapt
@@ -92,6 +92,7 @@ class Follow:
         self.segments = []  # (the driver's: the meshes left so far, for the checkpoints)
         self.checkpoint_step = 0
         self.earlier_ndof = None  # (a continued run: the mesh of each record before it)
+        self.earlier_indicators = None  # (and the largest indicators on its last mesh, squared, absolute)
         self.earlier_meshes = ([], {})  # (and of its snapshots: [(time, topology name)], the coarser meshes' variables)
         self._carried = {}  # (segments carried onto the last mesh: Follow.onto)
 
@@ -118,6 +119,8 @@ class Follow:
             self.refinements = list(zip(archive.refinement_time.values.tolist(),
                                         archive.refinement_ndof.values.tolist()))
         self.earlier_ndof = archive.ndof.values.copy()
+        # (the indicators its last mesh met before: the run goes on on that mesh until it refines again)
+        self.earlier_indicators = (archive.space_indicator.values * (self.norm if self.norm > 0 else 1.0)) ** 2
         if "snapshot_mesh" in archive:
             self.earlier_meshes = (list(zip(archive.snapshot_time.values, archive.snapshot_mesh.values.astype(str))),
                                    {n: v for n, v in archive.variables.items() if re.match(r"mesh_\d+", n)})
@@ -360,11 +363,13 @@ def merge(segments: list, follow: Follow, job) -> xr.Dataset:
     out["refinement_ndof"] = ("refinement", np.array(dofs, dtype=np.int64), {"units": "1", "long_name":
                               "the displacement dofs of the mesh after each refinement"})
     indicators = job.indicators if job.indicators is not None else np.zeros(final_disc.mesh.ne)
+    if follow.earlier_indicators is not None and len(segments) == 1:  # (continued on the archive's last mesh: what
+        indicators = np.maximum(indicators, follow.earlier_indicators)  # it met there before counts, as in one run)
     out["space_indicator"] = ("cell", np.sqrt(indicators) / scale, {"units": "1", "long_name": "the element's "
                               "largest error indicator on the final mesh (both parts), relative to the largest energy "
                               "norm of u"})
-    if len(segments) > 1:
-        out["adapted_mesh"] = ((), to_text(final_disc.geometry.adapted_mesh),
+    if adapted_mesh(final_disc.geometry) is not None:  # (a continuation's too, where it refined no further: the
+        out["adapted_mesh"] = ((), to_text(adapted_mesh(final_disc.geometry)),  # next continuation reads it there)
                                {"long_name": "the adapted mesh (netgen .vol text)"})
     largest = float(np.nanmax(out.space_error_estimate.values)) if out.sizes["time"] else float("nan")
     if "contact_edge_resolution" in out and np.isfinite(out.contact_edge_resolution.values).any():
