@@ -955,6 +955,35 @@ def test_the_code_digest_skips_an_editors_files(tmp_path):
     assert p.returncode == 0 and p.stdout.strip() == results.code_digest(), p.stderr
 
 
+_EDITED_AFTER_IMPORT = """
+import sys, workbench
+from workbench.output import results
+clean = results.code_digest()
+with open(sys.argv[1], "a") as f:
+    f.write("# edited\\n")
+ds = workbench.run("tp1", h=0.5, k=0.1, T=0.2, progress=False)
+print(clean, ds.attrs["version_workbench_code"], results.code_digest())
+"""
+
+
+def test_the_code_digest_says_where_the_sources_changed_after_the_import(tmp_path):
+    """The digest was read from the files on disk at the first archive: a source edited after ``import workbench``
+    (a notebook across a ``git pull``) stamped the archive, and the study's case keys, with code that had not made
+    it (an outside pass). Now a digest of files changed since the import ends in ``+changed``."""
+    import shutil
+    from pathlib import Path
+
+    package = Path(workbench.__file__).resolve().parent
+    shutil.copytree(package, tmp_path / "workbench", ignore=shutil.ignore_patterns("__pycache__"))
+    edited = tmp_path / "workbench" / "schemes" / "implicit_euler.py"
+    p = subprocess.run([sys.executable, "-c", _EDITED_AFTER_IMPORT, str(edited)], capture_output=True, text=True,
+                       env=dict(os.environ, PYTHONPATH=str(tmp_path)), cwd=tmp_path)
+    assert p.returncode == 0, p.stderr
+    clean, archived, now = p.stdout.split()
+    assert len(clean) == 16 and "+" not in clean
+    assert archived == now and archived.endswith("+changed") and not archived.startswith(clean), p.stdout
+
+
 def test_a_cases_warnings_are_one_line_each(tmp_path):
     """Warnings from a study's worker processes came as Python prints them, the file, line and source line around
     the message (an outside pass); they are one ``warning:`` line each, as the command line's own."""

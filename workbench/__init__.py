@@ -13,9 +13,32 @@ of workbench's own, start them with one thread (:func:`workbench.running.threads
 >>> float(ds.beta.isel(time=-1, facet=0)) < 1.0
 True
 """
+import os as _os
 from importlib import import_module
 
 from .errors import Diverged, Interrupted, ParameterError
+
+
+def _source_stats() -> tuple:
+    """(name, modification time in ns, size) of each of the package's source files, sorted; an editor's files (names
+    starting with a dot) and the compiled caches left out."""
+    root, out = _os.path.dirname(_os.path.abspath(__file__)), []
+    for folder, subfolders, files in _os.walk(root):
+        subfolders[:] = [d for d in subfolders if not d.startswith(".") and d != "__pycache__"]
+        for name in files:
+            if name.endswith(".py") and not name.startswith("."):
+                path = _os.path.join(folder, name)
+                try:
+                    stat = _os.stat(path)
+                except OSError:
+                    continue
+                out.append((_os.path.relpath(path, root).replace(_os.sep, "/"), stat.st_mtime_ns, stat.st_size))
+    return tuple(sorted(out))
+
+
+#: The sources as this process imported them (1 ms): a run's code digest says where they changed since
+#: (:func:`workbench.output.results.code_digest`).
+_SOURCES = _source_stats()
 
 __version__ = "0.1.0"
 __all__ = ["run", "load", "write", "scene", "Scene", "Study", "ParameterError", "Diverged", "Interrupted"]

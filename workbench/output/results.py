@@ -115,8 +115,9 @@ def attr_value(value):
 
 
 def versions() -> dict:
-    """The versions of the packages a run's numbers depend on, as attributes (``version_NAME``)."""
-    return dict(_versions())
+    """The versions of the packages a run's numbers depend on, as attributes (``version_NAME``), and the digest of
+    workbench's code (``version_workbench_code``, :func:`code_digest`)."""
+    return dict(_versions(), version_workbench_code=code_digest())
 
 
 @functools.lru_cache(maxsize=1)
@@ -131,28 +132,37 @@ def _versions() -> tuple:
             out.append((f"version_{pkg}", md.version(pkg)))
         except md.PackageNotFoundError:
             out.append((f"version_{pkg}", "unknown"))
-    return tuple(out) + (("version_workbench_code", code_digest()),)
+    return tuple(out)
 
 
 def code_digest() -> str:
     """The sha256 (16 hex digits) of the package's source files, names and contents: which code made a result. The
     version number stays the same between releases, so a study resumed after a change to the code reused the cases
     of the code before without a word, and a restart went on across it (found by an outside pass); the cases are
-    keyed by this digest, and a restart names it where it changed. 86 files, 11 ms, once per process."""
+    keyed by this digest, and a restart names it where it changed. 86 files, 11 ms, once per state of the files.
+
+    The digest is of the files as they are when it is asked for; where they changed after this process imported
+    workbench (their times or sizes differ from ``import workbench``'s), the code that runs may be either, and the
+    digest ends in ``+changed``: no case of a study is then taken for a clean one's. It had named the files on disk
+    at the first archive, edited after the import (an outside pass)."""
+    import workbench
+
+    now = workbench._source_stats()
+    digest = _digest(now)
+    return digest if now == workbench._SOURCES else f"{digest}+changed"
+
+
+@functools.lru_cache(maxsize=4)
+def _digest(stats: tuple) -> str:
+    """The digest of the files ``stats`` lists (:func:`code_digest`), read once for each state of them."""
     import hashlib
     from pathlib import Path
 
     root = Path(__file__).resolve().parent.parent
     h = hashlib.sha256()
-    try:
-        files = sorted(p for p in root.rglob("*.py") if "__pycache__" not in p.parts)
-    except OSError:
-        return "unknown"
-    for path in files:
-        if any(part.startswith(".") for part in path.relative_to(root).parts):  # (an editor's lock or backup file:
-            continue  # Emacs's .#cli.py, a link to nowhere, failed every run at its end, an outside pass)
+    for name, _, _ in stats:
         try:
-            h.update(path.relative_to(root).as_posix().encode() + b"\0" + path.read_bytes() + b"\0")
+            h.update(name.encode() + b"\0" + (root / name).read_bytes() + b"\0")
         except OSError:
             continue
     return h.hexdigest()[:16]
