@@ -148,6 +148,23 @@ def test_a_continuation_records_at_the_record_times_its_archive_was_given(tmp_pa
     assert_same_run(ds, straight)
 
 
+def test_a_run_on_a_grid_of_its_own_keeps_it_for_its_continuation(tmp_path):
+    """A run given ``times=`` kept the grid nowhere (its history elides the middle of a long list): it could be
+    neither continued nor run again from its archive (an outside pass). The grid is now in its restart state
+    (``state_time_grid``): a checkpoint continued without ``times=`` takes the straight run's steps, and a later T
+    off the grid is refused naming it."""
+    grid = np.unique(np.r_[0.0, np.geomspace(1e-3, 0.2, 30), 0.1])
+    values = dict(h=0.1, scheme="implicit", T=0.2, record_times=[0.1, 0.2], progress=False)
+    path = tmp_path / "run.nc"
+    straight = workbench.run("tp4", times=grid, checkpoint=path, checkpoint_every=9, **values)
+    np.testing.assert_array_equal(straight.state_time_grid.values, grid)
+    assert workbench.load(path).attrs["status"] == "checkpoint"
+    ds = workbench.run(restart=path, checkpoint=tmp_path / "on.nc", progress=False)
+    assert_same_run(ds, straight)
+    with pytest.raises(workbench.ParameterError, match=r"its own time grid \(times=.*T = 0.3 is not one of its times"):
+        workbench.run(restart=path, T=0.3, checkpoint_every=0, progress=False)
+
+
 @pytest.mark.parametrize("how", ["continued in place", "checkpoints"])
 def test_a_run_that_stops_leaves_the_state_it_went_on_from(tmp_path, capsys, how):
     """``workbench run --restart OUT.nc -o OUT.nc`` (and a run writing checkpoints to OUT.nc) that diverges wrote its

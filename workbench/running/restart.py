@@ -58,6 +58,7 @@ STATE_VARIABLES = {
     "history_time": ("s", "restart state: times of the accepted states kept (predictors, multistep formulas)"),
     "history_u": ("m", "restart state: displacement dofs of the accepted states kept"),
     "history_beta": ("1", "restart state: bonding field of the accepted states kept"),
+    "time_grid": ("s", "restart state: the time grid the run was given (times=), which a continuation takes"),
 }
 
 
@@ -141,6 +142,10 @@ def _encode(state):
         arrays["history_u"] = (("state_history", "state_dof"), np.stack([h[1] for h in history]))
         if history[0][2] is not None:
             arrays["history_beta"] = (("state_history", "facet"), np.stack([h[2] for h in history]))
+    steps = dict(state["steps"])
+    if "grid" in steps:  # (a grid of the user's, times=: an array, not JSON text in an attribute)
+        arrays["time_grid"] = ((f"{PREFIX}time_grid_0",), np.asarray(steps.pop("grid"), dtype=float))
+        steps["grid"] = "time_grid"
     extra = {}
     for key, value in s["extra"].items():
         if key in arrays:
@@ -160,7 +165,7 @@ def _encode(state):
             extra[key] = {"value": _plain(value)}
     meta = {"format": FORMAT, "time": float(state["time"]), "scheme_name": state["scheme_name"], "ndof": ndof,
             "k_last": float(s["k_last"]), "u_scale": float(s["u_scale"]), "history": len(history), "extra": extra,
-            "cache": _plain(s.get("cache", [])), "steps": _plain(state["steps"]),
+            "cache": _plain(s.get("cache", [])), "steps": _plain(steps),
             "recorder": _plain(state["recorder"])}
     return arrays, meta
 
@@ -195,8 +200,11 @@ def decode(ds: xr.Dataset) -> dict:
             extra[key] = spec["value"]
     scheme = {"u": arr("u"), "v": arr("v"), "beta": beta, "k_last": meta["k_last"], "u_scale": meta["u_scale"],
               "history": history, "extra": extra, "cache": meta["cache"]}
+    steps = dict(meta["steps"])
+    if "grid" in steps:
+        steps["grid"] = arr(steps["grid"])
     return {"time": meta["time"], "scheme_name": meta["scheme_name"], "ndof": meta["ndof"], "scheme": scheme,
-            "steps": meta["steps"], "recorder": meta["recorder"]}
+            "steps": steps, "recorder": meta["recorder"]}
 
 
 def restore(state: dict, disc, scheme, steps, recorder, archive: xr.Dataset) -> None:

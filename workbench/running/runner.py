@@ -97,7 +97,7 @@ def run(scene=None, *, restart=None, checkpoint=None, progress=None, record_time
     sc, resume = _scene_and_archive(scene, restart, overrides, model)
     _check_checkpoint(sc, checkpoint, inherited=restart is not None and "checkpoint_every" not in overrides)
     numerics = numerics_of.from_scene(sc, threads)
-    grid, sync, record_times = _grid(sc, numerics, times, record_times, resume)
+    grid, sync, record_times, given = _grid(sc, numerics, times, record_times, resume)
     model = _on_archived_mesh(model or sc.model_of(), resume)
     world = parallel.world()
     parallel.check(sc, model, numerics)
@@ -105,7 +105,7 @@ def run(scene=None, *, restart=None, checkpoint=None, progress=None, record_time
     call = _call(scene, dict(restart=restart, checkpoint=checkpoint), overrides,
                  dict(record_times=record_times, times=times, limit=limit, threads=threads))
     job = functools.partial(_Run, sc, numerics=numerics, world=world, call=call, resume=resume, checkpoint=checkpoint,
-                            progress=progress)
+                            progress=progress, given_grid=given is not None)
     with blas_single_threaded(), _quiet_unless_root(world):  # (space_tol > 0: repeated on, or refined to, finer meshes)
         return _driver(numerics)(job, model, numerics, (grid, sync, record_times, limit))
 
@@ -127,7 +127,7 @@ def checks(scene=None, *, threads=None, model=None, **overrides) -> dict:
     _check_objects(record_times=None, times=None, model=model, restart=None)
     sc, _ = _scene_and_archive(scene, None, overrides, model)
     numerics = numerics_of.from_scene(sc, threads)
-    grid, sync, _ = _grid(sc, numerics, None, None, None)
+    grid, sync, _, _ = _grid(sc, numerics, None, None, None)
     model, world = model or sc.model_of(), parallel.world()
     parallel.check(sc, model, numerics)
     preflight.refusals(sc, model, numerics, grid, None, processes=world.size)
@@ -195,10 +195,13 @@ def _check_options(overrides: dict, checkpoint, limit, threads, progress=None) -
 
 
 def _grid(sc, numerics, times, record_times, resume):
-    """(the fixed-step grid, the times it must contain, the times to record); a continued run's grid must start with
-    the archive's, and it records at the times its archive was given unless given others."""
+    """(the fixed-step grid, the times it must contain, the times to record, the grid given or None); a continued run's
+    grid must start with the archive's, and it records at the times, and steps on the grid, its archive was given
+    unless given others."""
     if record_times is None and resume is not None:
         record_times = resume.record_times
+    if times is None and resume is not None:
+        times = resume.times(sc["T"])
     sync = tuple(sc["snapshots"]) + (tuple(record_times) if record_times is not None else ())
     try:
         grid = time_grid(sc["T"], sc["k"], times, sync=sync)
@@ -210,7 +213,7 @@ def _grid(sc, numerics, times, record_times, resume):
         raise ParameterError(f"{err}{hint}") from None
     if resume is not None and not numerics.adaptive:
         restarts.check_grid(resume.path, grid, resume.state, resume.archive)
-    return grid, sync, record_times
+    return grid, sync, record_times, times
 
 
 def _check_objects(record_times, times, model, restart) -> None:
@@ -313,6 +316,20 @@ class _Resume:
     def provenance(self, attrs: dict) -> dict:
         return restarts.provenance(attrs, self.archive, self.path, self.state["time"])
 
+    def times(self, T: float):
+        """The time grid the archived run was given (``times=``, kept in its restart state) to ``T``, or None where
+        it had none. Such an archive held its grid nowhere: it could not be continued, nor run again, from itself (an
+        outside pass)."""
+        grid = self.state["steps"].get("grid")
+        if grid is None:
+            return None
+        at = np.flatnonzero(np.abs(grid - T) <= 1e-9 * max(abs(T), 1.0))
+        if not at.size:
+            raise ParameterError(f"restart {str(self.path)!r}: the archived run was given its own time grid (times=, "
+                                 f"in its state_time_grid, from 0 to {grid[-1]:g} s), and T = {T:g} is not one of its "
+                                 "times: give times= again, that grid carried on to T")
+        return grid[: at[0] + 1]
+
     @property
     def record_times(self):
         """The ``record_times`` the archived run was given (its attribute), or None."""
@@ -384,8 +401,10 @@ class _Run:
     """One run, put together: the discretisation, the scheme and its step controller, the recorder, the checkpoints
     and the Dataset's attributes (scene -> model -> discretisation -> scheme -> recorded Dataset)."""
 
-    def __init__(self, sc, model, numerics, world, call, *, resume=None, checkpoint=None, progress=None):
+    def __init__(self, sc, model, numerics, world, call, *, resume=None, checkpoint=None, progress=None,
+                 given_grid=False):
         self.sc, self.model, self.numerics, self.world, self.call = sc, model, numerics, world, call
+        self.given_grid = given_grid  # (times=: the grid is kept in the restart state)
         self.resume, self.checkpoint, self.progress = resume, checkpoint, progress
         self.failed_checkpoint, self.record_times = None, None
         # (space_tol > 0: the estimate in space; per element the largest indicator and what marking uses, over the run)
@@ -416,7 +435,7 @@ class _Run:
                 self.steps = self._controller(scheme, sync)
                 self.checks = scheme.preflight(n.k)
             else:
-                self.steps = FixedSteps(grid)
+                self.steps = FixedSteps(grid, given=self.given_grid)
                 self.checks = scheme.preflight(self.steps.k_max)
         self.setup_time = setup.wall
         return disc, scheme

@@ -87,9 +87,11 @@ class FixedSteps:
 
     adaptive = False
 
-    def __init__(self, grid):
+    def __init__(self, grid, given: bool = False):
         self.grid = np.asarray(grid, dtype=float)
         self.index = 0
+        #: A grid of the user's (``times=``): kept in the restart state, where nothing else says it.
+        self.given = given
 
     @property
     def t0(self) -> float:
@@ -128,8 +130,10 @@ class FixedSteps:
         return self.index
 
     def state(self) -> dict:
-        """What a restart needs to go on with the same grid: the index reached, and its time (to check the grid)."""
-        return {"kind": "fixed", "index": self.index, "time": self.t}
+        """What a restart needs to go on with the same grid: the index reached, and its time (to check the grid); a
+        grid of the user's itself (a continuation takes it from the archive)."""
+        own = {"grid": self.grid.copy()} if self.given else {}
+        return {"kind": "fixed", "index": self.index, "time": self.t} | own
 
     def restore(self, state: dict) -> None:
         self.index = int(state["index"])
