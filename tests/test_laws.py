@@ -188,6 +188,8 @@ def test_an_adaptive_run_lands_on_the_kink_a_new_law_declares():
     for law in (Stiffening, Undeclared):
         model = dataclasses.replace(sc.model_of(), contact=Contact([law(1.0, 10.0, d)]))
         ds = workbench.run(sc, model=model, progress=False)
+        # (the history names the model given and its law's values: it had left model= out, an outside pass)
+        assert f"model=<ModelA, terms stiffening: {law.__name__}(c=1.0, c2=10.0, d=0.03)>" in ds.attrs["history"]
         u_nu = ds.u_contact.isel(node=0, component=0).values  # (the rod's end: u_nu = u)
         assert u_nu.max() > 1.5 * d  # the run passes the kink
         misses.append(np.abs(u_nu - d).min())

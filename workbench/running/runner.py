@@ -25,6 +25,7 @@ from ..errors import Diverged, Interrupted, ParameterError
 from ..expressions import Expression
 from ..input import numerics as numerics_of
 from ..input import scenes
+from ..input.models import MODELS
 from ..input.geometry import of_run
 from ..output import results
 from ..schemes import scheme_class
@@ -98,16 +99,16 @@ def run(scene=None, *, restart=None, checkpoint=None, progress=None, record_time
     _check_checkpoint(sc, checkpoint, inherited=restart is not None and "checkpoint_every" not in overrides)
     numerics = numerics_of.from_scene(sc, threads)
     grid, sync, record_times, given = _grid(sc, numerics, times, record_times, resume)
-    model = _on_archived_mesh(model or sc.model_of(), resume)
+    physics = _on_archived_mesh(model or sc.model_of(), resume)
     world = parallel.world()
-    parallel.check(sc, model, numerics)
-    preflight.refusals(sc, model, numerics, grid, times, processes=world.size)
+    parallel.check(sc, physics, numerics)
+    preflight.refusals(sc, physics, numerics, grid, times, processes=world.size)
     call = _call(scene, dict(restart=restart, checkpoint=checkpoint), overrides,
-                 dict(record_times=record_times, times=times, limit=limit, threads=threads))
+                 dict(record_times=record_times, times=times, limit=limit, threads=threads, model=model))
     job = functools.partial(_Run, sc, numerics=numerics, world=world, call=call, resume=resume, checkpoint=checkpoint,
                             progress=progress, given_grid=given is not None)
     with blas_single_threaded(), _quiet_unless_root(world):  # (space_tol > 0: repeated on, or refined to, finer meshes)
-        return _driver(numerics)(job, model, numerics, (grid, sync, record_times, limit))
+        return _driver(numerics)(job, physics, numerics, (grid, sync, record_times, limit))
 
 
 def checks(scene=None, *, threads=None, model=None, **overrides) -> dict:
@@ -372,8 +373,23 @@ def _call(scene, paths: dict, overrides: dict, options: dict) -> str:
                                       else repr(str(scene) if isinstance(scene, PurePath) else scene)]
     given += [f"{k}={results.brief(v)}" for k, v in paths.items() if v is not None]
     given += [f"{k}={results.brief(v)}" for k, v in overrides.items()]
-    given += [f"{k}={results.brief(v)}" for k, v in options.items() if v is not None]
+    given += [f"{k}={_model_call(v) if k == 'model' else results.brief(v)}" for k, v in options.items()
+              if v is not None]
     return f"workbench.run({', '.join(given)})"
+
+
+def _model_call(model) -> str:
+    """A model given to the run (``model=``), for its history: its kind and terms, and the values of its contact
+    terms, one of the user's own among them perhaps, which no scene names (the history had left it out: an outside
+    pass).
+
+    >>> import workbench
+    >>> _model_call(workbench.scene("tp1").model_of())  # doctest: +ELLIPSIS
+    '<ModelA, terms compliance, adhesion: NormalCompliance(c_nu=1.0, m_nu=1.0, gap=0.0, L=0.3), AdhesivePull(...)>'
+    """
+    terms = model.contact.terms if isinstance(model, MODELS["A"]) else ()
+    values = [f"{type(t).__name__}({', '.join(f'{k}={v!r}' for k, v in vars(t).items())})" for t in terms]
+    return f"<{type(model).__name__}, terms {', '.join(model.terms)}{': ' + ', '.join(values) if values else ''}>"
 
 
 def _scene_call(sc) -> str:
