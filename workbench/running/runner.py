@@ -25,8 +25,8 @@ from ..errors import Diverged, Interrupted, ParameterError
 from ..expressions import Expression
 from ..input import numerics as numerics_of
 from ..input import scenes
-from ..input.models import MODELS
 from ..input.geometry import of_run
+from ..input.models import MODELS
 from ..output import results
 from ..schemes import scheme_class
 from ..schemes.stepping import AdaptiveSteps, FixedSteps, march, time_grid
