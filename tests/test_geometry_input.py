@@ -397,3 +397,31 @@ def test_an_adaptive_run_on_an_empty_mesh_cache_equals_one_on_a_filled_cache(tmp
     assert cold.attrs["space_levels"] > 1  # (the given mesh and at least one refined)
     for name in ("u_dofs", "node_x", "node_y", "contact_pressure", "space_error_estimate"):
         np.testing.assert_array_equal(cold[name].values, warm[name].values, err_msg=name)
+
+
+def test_an_archive_of_a_mesh_given_as_a_python_object_continues_after_the_cache_is_cleared(tmp_path, monkeypatch):
+    """A mesh given as an OCC geometry (or a mesh object) lives in a file in the cache folder: once the cache was
+    cleared, its archive could be neither continued nor run again ("no such file"; the hint spoke of a mesh file the
+    user never had; an outside pass). The archive now keeps the file's text (``stored_mesh``), and a continuation
+    writes it back, to the same digest."""
+    import shutil
+
+    from netgen.occ import X, Y, OCCGeometry, Rectangle
+
+    from workbench.running.restart import archived_scene
+
+    monkeypatch.setenv("WORKBENCH_CACHE", str(tmp_path / "cache"))
+    face = Rectangle(1.0, 0.2).Face()
+    face.edges.Min(Y).name, face.edges.Min(X).name, face.edges.Max(Y).name = "bottom", "left", "top"
+    sc = workbench.scene(mesh=OCCGeometry(face, dim=2), h=0.1, traction="(0, -t)", T=0.2, k=0.05,
+                         boundaries={"bottom": "contact", "left": "clamped", "top": "traction", "default": "free"})
+    half = workbench.run(sc.with_(T=0.1), progress=False)
+    assert "stored_mesh" in half
+    workbench.write(half, tmp_path / "half.nc")
+    straight = workbench.run(sc, progress=False)
+    shutil.rmtree(tmp_path / "cache")
+    monkeypatch.setenv("WORKBENCH_CACHE", str(tmp_path / "elsewhere"))  # (another machine's cache folder, too)
+    on = workbench.run(restart=tmp_path / "half.nc", T=0.2, progress=False)
+    np.testing.assert_array_equal(on.u_dofs.values[-1], straight.u_dofs.values[-1])
+    again = archived_scene(workbench.load(tmp_path / "half.nc"))
+    assert again["mesh_digest"] == sc["mesh_digest"] and again["mesh"].startswith(str(tmp_path / "elsewhere"))

@@ -268,6 +268,29 @@ def store(obj, h: float | None = None) -> Path:
     return final
 
 
+def is_stored(path) -> bool:
+    """Whether ``path`` names a mesh file :func:`store` made from a Python object: in a cache folder, which may be
+    cleared, so an archive of a run on it keeps its text (``stored_mesh``, :func:`restore`).
+
+    >>> is_stored("/home/me/.cache/workbench/meshes/22ac0b6b2f9c4d3e8a1b7c5d.vol"), is_stored("part.vol")
+    (True, False)
+    """
+    p = Path(str(path))
+    return p.suffix == ".vol" and len(p.stem) == 24 and all(c in "0123456789abcdef" for c in p.stem)
+
+
+def restore(text: str) -> Path:
+    """The mesh file :func:`store` made, written again from its text (an archive's ``stored_mesh``) in this
+    machine's cache folder, where it is gone (the cache cleared, another machine): the archive's run can then be
+    continued, or made again, from the archive alone (it could not: an outside pass)."""
+    folder = _writable(cache_folder())
+    tmp = folder / f".restore.{os.getpid()}.vol"
+    tmp.write_text(text)
+    final = folder / f"{digest(tmp)[:24]}.vol"
+    os.replace(tmp, final)
+    return final
+
+
 def _from_gmsh(path: Path):
     """A netgen mesh of a gmsh file (linear simplices; the names of the physical groups as region names)."""
     import meshio

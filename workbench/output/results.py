@@ -389,7 +389,7 @@ class Recorder:
             data[key] = _var(("time", "midpoint"), np.stack(arrs) if arrs else np.empty((0, midpoints)), key)
         if self.snaps:
             self._snapshot_variables(coords, data)
-        return xr.Dataset(data, coords=coords, attrs=attrs)
+        return xr.Dataset(data | stored_mesh(d.scene), coords=coords, attrs=attrs)
 
     def snapshot_dataset(self, snaps: list) -> xr.Dataset:
         """The snapshot section of a Dataset (the fields and the mesh) for ``snaps`` [(t, u dofs, stress, von Mises,
@@ -423,6 +423,24 @@ class Recorder:
 #: UGRID names by dimension: (cell connectivity role, the shape of the cells, the location of cell data).
 UGRID_CELLS = {1: ("edge_node_connectivity", "", "edge"), 2: ("face_node_connectivity", "", "face"),
                3: ("volume_node_connectivity", "tetrahedron", "volume")}
+
+
+def stored_mesh(scene) -> dict:
+    """``{"stored_mesh": its text}`` where the scene's mesh is a file made from a Python object (an OCC geometry, a
+    netgen mesh) in the cache folder, which may be cleared: a restart, or :func:`workbench.running.restart.
+    archived_scene`, writes it again from the archive (:func:`workbench.input.meshes.restore`). Else ``{}``."""
+    from ..input.meshes import is_stored
+
+    path = scene.values.get("mesh")
+    if not isinstance(path, str) or not is_stored(path):
+        return {}
+    try:
+        text = Path(path).read_text()
+    except (OSError, UnicodeDecodeError):  # (the cache cleared during the run: the archive cannot keep it)
+        return {}
+    return {"stored_mesh": xr.Variable((), text, attrs={
+        "long_name": "the mesh file the run's mesh (given as a Python object) was stored in, in the cache folder "
+                     "(netgen .vol text): a continuation writes it again where that file is gone"})}
 
 
 def ugrid_mesh(name: str, dim: int, vertex_xyz: np.ndarray, cells: np.ndarray) -> dict:

@@ -288,6 +288,10 @@ def archived_scene(ds: xr.Dataset, *, whole: bool = False, **overrides):
     archived (``parameters_json``; so are archives that do not say what their user gave)."""
     a = ds.attrs
     values = json.loads(a["parameters_json"])
+    if "stored_mesh" in ds and "mesh" not in overrides and not Path(str(values.get("mesh", ""))).is_file():
+        from ..input.meshes import restore  # (a mesh given as a Python object, its file in a cache cleared since)
+
+        overrides = dict(overrides, mesh=str(restore(str(ds.stored_mesh.values))))
     if not whole and "set_by_user_json" in a:
         values = {name: values[name] for name in json.loads(a["set_by_user_json"]) if name in values}
     elif not whole:
