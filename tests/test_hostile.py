@@ -393,3 +393,14 @@ def test_reproduce_all_refuses_a_step_above_a_later_problems_stability_limit_bef
     _one_error(*_cli(capsys, "reproduce", "all", "--k", "0.5", "--no-side", "--out", str(out)),
                "tp4: k = ", "exceeds the predicted stability limit", "k_crit = 0.052")
     assert not out.exists() or not any(out.iterdir())
+    # (every scheme's checks: the first version of the check knew the explicit scheme's alone, and every other
+    # scheme's reproduction ended in an AttributeError, an outside pass)
+    assert cli.main(["reproduce", "tp4", "--h", "0.2", "--k", "0.02", "--no-side", "--set", "scheme=implicit",
+                     "--out", str(out)]) == 0
+    assert (out / "tp4.nc").exists()
+    # (two more found only after the run, as tracebacks: a rod whose reference ODE cannot be made, no bonding field)
+    for problem, value, words in (("tp2", "u0=-0.1+0.01*x", "rod_ode needs u0 = delta(0)"),
+                                  ("tp4", "adhesion=false", "adhesion = false")):
+        _one_error(*_cli(capsys, "reproduce", problem, "--set", value, "--no-side", "--out", str(tmp_path / "no")),
+                   f"{problem}: ", words)
+        assert not (tmp_path / "no").exists()

@@ -537,7 +537,118 @@ def test_a_signal_after_the_run_returned_does_not_lose_it(tmp_path, signum):
                         "a.nc"], cwd=tmp_path, capture_output=True, text=True)
     assert p.returncode == 128 + signum and "Traceback" not in p.stderr, p.stderr
     assert "after the run had completed: its results are kept" in p.stderr, p.stderr
+    assert "incomplete" not in p.stdout + p.stderr  # (it is written as the complete run it is, an outside pass)
     assert workbench.load(tmp_path / "a.nc").attrs["status"] == "complete"
+    # (with checkpoints to -o: the complete run there, not beside it as a stopped one)
+    p = subprocess.run([sys.executable, "-c", _SIGNALLED_ON_THE_WAY_BACK, str(signum), "run", "tp1", *RUN_TINY,
+                        "--set", "checkpoint_every=3", "-o", "c.nc"], cwd=tmp_path, capture_output=True, text=True)
+    assert p.returncode == 128 + signum and not (tmp_path / "c.stopped.nc").exists(), p.stderr
+    assert workbench.load(tmp_path / "c.nc").attrs["status"] == "complete"
+
+
+_SIGNALLED_AROUND = """
+import importlib, os, sys
+from workbench.running.threads import lean_process
+lean_process()
+spec, when, nth, signum = sys.argv[1:5]
+del sys.argv[1:5]
+module, _, name = spec.partition(":")
+owner = importlib.import_module(module)
+*path, attr = name.split(".")
+for part in path:
+    owner = getattr(owner, part)
+original, calls = getattr(owner, attr), [0]
+
+def wrapped(*args, **kwargs):
+    calls[0] += 1
+    if calls[0] == int(nth) and when == "before":
+        os.kill(os.getpid(), int(signum))
+    out = original(*args, **kwargs)
+    if calls[0] == int(nth) and when == "after":
+        os.kill(os.getpid(), int(signum))
+    return out
+
+setattr(owner, attr, wrapped)
+from workbench.cli import console
+sys.exit(console())
+"""
+
+FOLLOWING = ("run", "slab", "--h", "0.25", "--k", "0.05", "--T", "0.5", "--scheme", "implicit", "--set",
+             "space_tol=0.2", "--no-progress")
+
+
+def _signalled_at(tmp_path, where: str, when: str, nth: int, *args, signum: int = 15):
+    return subprocess.run([sys.executable, "-c", _SIGNALLED_AROUND, where, when, str(nth), str(signum), *args],
+                          cwd=tmp_path, capture_output=True, text=True)
+
+
+@pytest.mark.parametrize("where, when, nth, mode", [
+    ("workbench.running.follow:_warned", "after", 1, "during"),  # (the meshes' records merged: the run is over)
+    ("workbench.running.adapt:_with_levels", "after", 1, "repeat"),  # (the levels added: the run is over)
+    ("workbench.running.runner:_Run.set_up", "before", 2, "during"),  # (the first finer mesh set up: not over)
+])
+def test_a_stop_signal_at_an_adaptive_runs_end_keeps_its_whole_result_or_nothing(tmp_path, where, when, nth, mode):
+    """The command kept the last run it saw finish, which for an adaptive run was one mesh's: a stop signal while the
+    first finer mesh was set up wrote the first pass, which the run had just rejected (ndof 20 of 1734), as "the run
+    had completed"; one while the meshes' records were merged wrote the last mesh's alone, without its mesh (an
+    outside pass). Only an adaptive run's merged result is kept now; once it is made, the signal is dropped."""
+    p = _signalled_at(tmp_path, where, when, nth, *FOLLOWING, "--set", f"space_adapt={mode}", "-o", "a.nc")
+    assert "Traceback" not in p.stderr, p.stderr
+    if nth == 2:  # (stopped during the run: nothing complete to keep, and nothing said to be)
+        assert p.returncode == 143 and not (tmp_path / "a.nc").exists() and "completed" not in p.stderr, p.stderr
+        return
+    assert p.returncode == 0, p.stderr
+    ds = workbench.load(tmp_path / "a.nc")
+    assert ds.attrs["status"] == "complete" and ds.attrs["space_stop"] == "met" and "adapted_mesh" in ds
+    assert ds.attrs["ndof"] > 1000 and float(ds.time[0]) == 0.0
+
+
+def test_a_stop_signal_in_a_later_meshs_steps_keeps_every_meshs_records(tmp_path):
+    """A run that follows its solution, stopped in the steps of a finer mesh, kept that mesh's records alone (one
+    record, t = 0.15), where a diverged run's are merged across its meshes (an outside pass); now both are."""
+    p = _signalled_at(tmp_path, "workbench.running.follow:Follow.consider", "after", 16, *FOLLOWING, "--set",
+                      "space_adapt=during", "-o", "a.nc")
+    assert p.returncode == 143 and "Traceback" not in p.stderr, p.stderr
+    ds = workbench.load(tmp_path / "a.nc")
+    assert ds.attrs["status"] == "incomplete" and float(ds.time[0]) == 0.0 and ds.sizes["time"] > 2
+    assert len(set(ds.ndof.values.tolist())) > 1  # (records of more than one mesh)
+
+
+def test_a_stop_signal_while_a_diverged_run_is_kept_does_not_lose_it(tmp_path):
+    """A stop signal while the message of a diverged run was made ended the command, "error: terminated", nothing
+    written (an outside pass): the signals are ignored from the run's end on, whatever its end."""
+    p = _signalled_at(tmp_path, "workbench.cli:_one_line", "after", 3, "run", "tp4", "--h", "0.25", "--k", "0.2",
+                      "--T", "4", "--set", "allow_unstable=true", "--no-progress", "-o", "v.nc")
+    assert p.returncode == 3 and "Traceback" not in p.stderr, p.stderr
+    assert workbench.load(tmp_path / "v.nc").attrs["status"] == "incomplete"
+
+
+def test_a_second_command_in_the_same_process_does_not_write_the_first_run(tmp_path, monkeypatch):
+    """The command's hold on a finished run was never emptied: a second ``cli.main`` in the same process (a notebook,
+    a test), stopped in its setup, wrote the first command's run (tp1) into its own archive as complete (an outside
+    pass)."""
+    import signal
+
+    from workbench import cli
+    from workbench.running import runner
+
+    monkeypatch.chdir(tmp_path)
+    saved = {s: signal.getsignal(s) for s in (signal.SIGINT, signal.SIGTERM, signal.SIGHUP)}
+    try:
+        assert cli.main(["run", "tp1", "--h", "0.1", "--k", "0.05", "-o", "first.nc", "--no-progress"]) == 0
+        set_up = runner._Run.set_up
+
+        def stopped(job, *args):
+            raise KeyboardInterrupt
+
+        monkeypatch.setattr(runner._Run, "set_up", stopped)
+        assert cli.main(["run", "tp4", "--h", "0.25", "--k", "0.01", "--T", "0.1", "-o", "second.nc",
+                         "--no-progress"]) == 130
+        assert not (tmp_path / "second.nc").exists()
+        monkeypatch.setattr(runner._Run, "set_up", set_up)
+    finally:
+        for s, handler in saved.items():
+            signal.signal(s, handler)
 
 
 def test_a_run_whose_messages_cannot_be_shown_still_writes_its_archive(tmp_path):

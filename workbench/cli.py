@@ -278,13 +278,15 @@ def cmd_run(args) -> int:
     from .running.runner import run
 
     _first_signal_stops()
-    kept = keep_finished()  # (a stop signal just after the run's end, its Dataset on its way here: written still)
+    kept, after = keep_finished(), 0  # (a stop signal just after the run's end, its result on its way here: kept)
     try:
         # -o is also where checkpoints go (checkpoint_every): a killed run goes on with the same command + --restart
         ds = run(args.scene, restart=args.restart, checkpoint=args.output,
                  progress=False if args.no_progress else None, threads=_threads(args.threads), **overrides)
+        _stop_listening()  # (what is left is to keep the run)
         code = 0
     except Diverged as err:
+        _stop_listening()  # (a stop signal while a diverged run was kept lost it, an outside pass)
         if err.dataset is None:  # (several MPI processes: rank 0 has the result and says it)
             return EXIT_DIVERGED
         _say(_one_line(f"error: {err}"), sys.stderr)
@@ -292,27 +294,29 @@ def cmd_run(args) -> int:
     except Interrupted as err:  # (Ctrl-C, SIGTERM: the steps before are written as a diverged run's are)
         if err.dataset is None and _other_rank():  # (several MPI processes: rank 0 has the result and says it)
             return 128 + err.signal
-        ds, code = _stopped_after(err, kept) if err.dataset is None else (err.dataset, 128 + err.signal)
+        ds, code, after = _stopped_after(err, kept) if err.dataset is None else (err.dataset, 128 + err.signal, 0)
         if err.dataset is not None:
             _say(_one_line(f"error: {err}"), sys.stderr)
     except KeyboardInterrupt as err:
-        ds, code = _stopped_after(err, kept)
+        ds, code, after = _stopped_after(err, kept)
+    finally:
+        keep_finished(False)
     if ds is None:  # (several MPI processes: rank 0 holds the result and writes it)
         return code
-    return _write_run(args, ds, code)
+    return _write_run(args, ds, code) or after
 
 
 def _stopped_after(err, kept: list):
-    """(the run's Dataset, the exit code) for a stop signal that came after the run had finished (``kept``:
-    :func:`~workbench.discrete.world.keep_finished`), before its archive was written; ``err`` raised again where no
-    run had finished (the signal stopped the setup: nothing computed)."""
+    """(the run's Dataset, 0: it is written as a complete run, the exit code after) for a stop signal that came after
+    the run had finished (``kept``: :func:`~workbench.discrete.world.keep_finished`), before its archive was
+    written; ``err`` raised again where no run had finished (the signal stopped the setup: nothing computed)."""
     from .discrete.world import stopped_by
 
     if not kept:
         raise err
     signum = err.signal if isinstance(err, Interrupted) else 2
     _say(f"error: {stopped_by(signum)} after the run had completed: its results are kept\n", sys.stderr)
-    return kept[-1], 128 + signum
+    return kept[-1], 0, 128 + signum
 
 
 def _not_an_input(args, sc) -> None:

@@ -116,17 +116,19 @@ def stop_requested() -> int:
 _FINISHED = {"keep": False, "runs": []}
 
 
-def keep_finished() -> list:
-    """From now on, each run that finishes in this process (:func:`finished`) is kept in the list returned, the last
-    one alone: the command line's own, so that a stop signal in the instants between the run's end and its archive
-    being written (its Dataset on its way back through the calls) does not lose a complete run. A Python session
-    keeps its result itself, and nothing is held for it."""
-    _FINISHED["keep"] = True
+def keep_finished(keep: bool = True) -> list:
+    """From now on (``keep``; False: no longer), the result of the run that finishes in this process
+    (:func:`finished`) is kept in the list returned, emptied here: the command line's own, so that a stop signal in
+    the instants between the run's end and its archive being written (its Dataset on its way back through the
+    calls) does not lose a complete run. A Python session keeps its result itself, and nothing is held for it."""
+    _FINISHED["keep"] = keep
+    _FINISHED["runs"].clear()  # (a command run before in the same process, a test's: not this one's)
     return _FINISHED["runs"]
 
 
 def finished(ds) -> None:
-    """A run's complete Dataset, made while the stop signals were held (:func:`keep_finished`)."""
+    """A run's final, complete Dataset (a run on one mesh, or an adaptive run's merged result: not the run on each of
+    its meshes), made while the stop signals were held (:func:`keep_finished`)."""
     if _FINISHED["keep"] and ds is not None:
         _FINISHED["runs"][:] = [ds]
 

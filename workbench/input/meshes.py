@@ -274,9 +274,12 @@ def is_stored(path) -> bool:
 
     >>> is_stored("/home/me/.cache/workbench/meshes/22ac0b6b2f9c4d3e8a1b7c5d.vol"), is_stored("part.vol")
     (True, False)
+    >>> is_stored("/home/me/project/22ac0b6b2f9c4d3e8a1b7c5d.vol")  # (a user's own file so named)
+    False
     """
-    p = Path(str(path))
-    return p.suffix == ".vol" and len(p.stem) == 24 and all(c in "0123456789abcdef" for c in p.stem)
+    p = Path(str(path))  # (in a folder "meshes", as the cache's and its fallback in the temporary folder are)
+    return p.suffix == ".vol" and len(p.stem) == 24 and all(c in "0123456789abcdef" for c in p.stem) and \
+        p.parent.name == "meshes"
 
 
 def restore(text: str) -> Path:

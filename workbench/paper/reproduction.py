@@ -35,7 +35,7 @@ from pathlib import Path
 import numpy as np
 
 import workbench
-from workbench.errors import NotWritten
+from workbench.errors import NotWritten, ParameterError
 from workbench.output.results import far_facet
 from workbench.references import rod_ode, tp1_exact
 
@@ -149,9 +149,19 @@ def check(problem, h=None, k=None, **overrides) -> None:
     ...
     workbench.errors.StepTooLarge: k = 0.1 s exceeds the predicted stability limit of the explicit scheme, ...
     """
+    from workbench.references.rod import check_rod_ode
     from workbench.running.runner import checks
 
-    checks(problem_scene(problem, h, k, **overrides))
+    sc = problem_scene(problem, h, k, **overrides)
+    if not sc["adhesion"]:  # (found after the run, as an AttributeError, by an outside pass; so was the next)
+        raise ParameterError("adhesion = false: the paper's problems are compared by their bonding field beta, which "
+                             "then is not modelled; run the scene with `workbench run` instead")
+    if sc.dim == 1 and reference_kind(sc) == "ode":
+        try:
+            check_rod_ode(sc)
+        except ValueError as err:
+            raise ParameterError(f"the rod's reference (its reduced ODE) cannot be made: {err}") from None
+    checks(sc)
 
 
 def changed_from_paper(scene) -> dict:
@@ -176,11 +186,15 @@ def reference(scene):
     preset's data); any other rod scene with u0 = delta(0): the reduced ODE solved by
     Radau (:func:`workbench.references.rod_ode`).
     """
+    kind = reference_kind(scene)
+    return None if kind is None else tp1_exact() if kind == "exact" else rod_ode(scene)
+
+
+def reference_kind(scene):
+    """Which reference :func:`reference` makes: "exact" (tp1 as the paper has it), "ode", or None (slabs)."""
     if scene.dim != 1:
         return None
-    if scene.base == "tp1" and not (set(scene.set_by_user) - {"h", "k", "snapshots"}):
-        return tp1_exact()
-    return rod_ode(scene)
+    return "exact" if scene.base == "tp1" and not (set(scene.set_by_user) - {"h", "k", "snapshots"}) else "ode"
 
 
 def run_problem(problem, h=None, k=None, **overrides):

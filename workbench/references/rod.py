@@ -87,13 +87,8 @@ def rod_ode(scene, rtol=1e-11, atol=1e-13, model=None):
         with ``strain(t)`` and ``stress(t)``.
     """
     model = model or scene.model_of()
-    if model.geometry.dim != 1 or model.viscous is None:
-        raise ValueError(f"rod_ode needs a Kelvin-Voigt (Model A) rod scene, got {scene.name!r}")
-    loads = model.loads
-    delta, ell = loads.delta, model.geometry.extent[0]
-    if not np.allclose(loads.u0(x=np.linspace(0, ell, 7)), delta(t=0.0)):
-        raise ValueError("rod_ode needs u0 = delta(0) (constant): only then is u linear in x")
-    terms = _rod_terms(model)
+    terms = check_rod_ode(scene, model)
+    delta, ell = model.loads.delta, model.geometry.extent[0]
     a, b, law = model.elastic.modulus, model.viscous.modulus, model.bonding
     rhs = _rod_rhs(delta, ell, a, b, terms, law)
 
@@ -118,6 +113,25 @@ def rod_ode(scene, rtol=1e-11, atol=1e-13, model=None):
     return RodSolution(delta=lambda t: np.broadcast_to(np.asarray(delta(t=t), dtype=float), np.shape(t)).copy(),
                        strain=lambda t: sol.sol(t)[0], strain_rate=strain_rate, beta=lambda t: sol.sol(t)[1],
                        a=a, b=b)
+
+
+def check_rod_ode(scene, model=None) -> dict:
+    """Refuse a scene :func:`rod_ode` cannot solve (ValueError; ParameterError for a contact term it does not know),
+    before it or a run is made: a Kelvin-Voigt rod with u0 = delta(0). Its contact terms by their law's name.
+
+    >>> import workbench
+    >>> check_rod_ode(workbench.scene("tp2", u0="-0.1 + 0.01*x"))
+    Traceback (most recent call last):
+    ...
+    ValueError: rod_ode needs u0 = delta(0) (constant): only then is u linear in x
+    """
+    model = model or scene.model_of()
+    if model.geometry.dim != 1 or model.viscous is None:
+        raise ValueError(f"rod_ode needs a Kelvin-Voigt (Model A) rod scene, got {scene.name!r}")
+    loads = model.loads
+    if not np.allclose(loads.u0(x=np.linspace(0, model.geometry.extent[0], 7)), loads.delta(t=0.0)):
+        raise ValueError("rod_ode needs u0 = delta(0) (constant): only then is u linear in x")
+    return _rod_terms(model)
 
 
 def _radau(rhs, T, y0, rtol, atol, max_step, stiffness):

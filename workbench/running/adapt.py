@@ -30,6 +30,7 @@ import numpy as np
 import xarray as xr
 
 from ..discrete.estimator import longest_edges
+from ..discrete.world import finished, signals_held
 from ..input.geometry import on_mesh
 from ..input.meshes import to_text
 
@@ -176,17 +177,19 @@ def run(make_job, model, numerics, execute_args: tuple):
         try:
             job = make_job(model)
             ds = job.execute(*execute_args)
+            with signals_held():  # (a stop signal here comes once the level is counted, which it then keeps)
+                scale = job.largest_norm if job.largest_norm > 0 else 1.0  # (the estimates relative to the largest
+                ds["space_error_estimate"] = ds.space_error_estimate / scale  # norm)
+                ds["space_indicator"] = ("cell", np.sqrt(job.indicators) / scale, {
+                    "units": "1", "long_name": "the element's largest error indicator over the run (both parts), "
+                    "relative to the largest energy norm of u: what marking used"})
+                levels.append((job.disc.ndof, job.space_estimate / scale,
+                               ds.attrs["setup_time"] + ds.attrs["wall_time"]))
+                done = (ds, model.geometry)
         except KeyboardInterrupt as err:
             if done is None:
                 raise
             raise _kept(err, done, levels) from None
-        scale = job.largest_norm if job.largest_norm > 0 else 1.0  # (the estimates relative to the largest norm)
-        ds["space_error_estimate"] = ds.space_error_estimate / scale
-        ds["space_indicator"] = ("cell", np.sqrt(job.indicators) / scale, {
-            "units": "1", "long_name": "the element's largest error indicator over the run (both parts), relative "
-            "to the largest energy norm of u: what marking used"})
-        levels.append((job.disc.ndof, job.space_estimate / scale, ds.attrs["setup_time"] + ds.attrs["wall_time"]))
-        done = (ds, model.geometry)
         stop = _stop(levels, numerics)
         if stop:
             break
@@ -202,7 +205,10 @@ def run(make_job, model, numerics, execute_args: tuple):
         warnings.warn(f"space_tol = {numerics.space_tol:g} not met: the estimate is {levels[-1][1]:.3g} at "
                       f"{levels[-1][0]} dofs ({'max_dofs' if stop == 'max_dofs' else f'{MAX_LEVELS} meshes'} "
                       "reached)", RuntimeWarning, stacklevel=4)
-    return _with_levels(ds, levels, stop, model.geometry)
+    with signals_held(drop=True):  # (the loop is over: a stop signal while the levels are added is dropped, and the
+        out = _with_levels(ds, levels, stop, model.geometry)  # result kept for the command line, world.finished)
+        finished(out)
+        return out
 
 
 def _kept(err, done, levels) -> Exception:

@@ -44,7 +44,8 @@ import warnings
 import numpy as np
 import xarray as xr
 
-from ..errors import Diverged
+from ..discrete.world import finished, signals_held
+from ..errors import Diverged, Interrupted
 from ..input.geometry import adapted_mesh, on_mesh
 from ..input.meshes import from_text, to_text
 from ..output.results import ugrid_mesh
@@ -282,11 +283,22 @@ def run(make_job, model, numerics, execute_args: tuple):
         except Refine as refine:
             r = refine
             continue
-        except Diverged as err:  # (what every mesh computed, on the last one)
-            if err.dataset is not None:
-                err.dataset = merge(segments + [(job.disc, err.dataset, None)], follow, job)
+        except (Diverged, Interrupted) as err:  # (what every mesh computed, on the last one; a stop signal's too:
+            if err.dataset is not None:  # the last mesh's records alone were kept, an outside pass)
+                with signals_held(drop=True):
+                    err.dataset = merge(segments + [(job.disc, err.dataset, None)], follow, job)
             raise
-        return _warned(merge(segments + [(job.disc, ds, None)], follow, job), follow)
+        return _final(segments + [(job.disc, ds, None)], follow, job)
+
+
+def _final(segments: list, follow: Follow, job, depth: int = 5) -> xr.Dataset:
+    """The run's result, every mesh's records merged on the last, made with the stop signals dropped (the run is
+    over) and kept for the command line (:func:`~workbench.discrete.world.finished`): a signal while the meshes were
+    merged lost the run, or had the command write the last mesh's run alone (an outside pass)."""
+    with signals_held(drop=True):
+        out = _warned(merge(segments, follow, job), follow, depth)
+        finished(out)
+        return out
 
 
 def _warned(ds: xr.Dataset, follow: Follow, depth: int = 4) -> xr.Dataset:
@@ -321,7 +333,7 @@ def _first_pass(make_job, model, follow: Follow, execute_args: tuple):
     saved = follow.kept[failed[0] - 1] if failed and failed[0] > 0 else None
     follow.seen, follow.kept = [], []
     if follow.geometry is None:
-        return job, _warned(merge([(job.disc, ds, None)], follow, job), follow, depth=5)
+        return job, _final([(job.disc, ds, None)], follow, job, depth=6)
     return job, Refine(saved, ds, follow.geometry)
 
 

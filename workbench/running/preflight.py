@@ -154,7 +154,12 @@ def _snapshot_memory(scene, geometry, ndof: int, free: float) -> None:
 def refusals(scene, model, numerics, grid, times, processes: int = 1) -> None:
     """Every refusal of a run's inputs that needs its model and its grid, before any work: :func:`resources` and
     :func:`trapezoid_steps` (the longest step: the grid's, set by k or by ``times`` where given; k_max under error
-    control)."""
+    control). ``times`` with error control is refused: the controller chooses the steps, and the grid was ignored
+    without a word (an outside pass)."""
+    if times is not None and numerics.adaptive:
+        raise ParameterError(f"times = a grid of {len(times)} times with rtol = {numerics.rtol:g}: a grid fixes the "
+                             "steps, error control chooses them; give one or the other (record_times= takes the "
+                             "times to record at)")
     resources(scene, model, len(grid) - 1, processes=processes)
     longest = (numerics.largest_step, "k_max") if numerics.adaptive else \
         (float(np.max(np.diff(grid))), "k" if times is None else "times")

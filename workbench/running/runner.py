@@ -106,7 +106,7 @@ def run(scene=None, *, restart=None, checkpoint=None, progress=None, record_time
     call = _call(scene, dict(restart=restart, checkpoint=checkpoint), overrides,
                  dict(record_times=record_times, times=times, limit=limit, threads=threads, model=model))
     job = functools.partial(_Run, sc, numerics=numerics, world=world, call=call, resume=resume, checkpoint=checkpoint,
-                            progress=progress, given_grid=given is not None)
+                            progress=progress, given_grid=given is not None, final=numerics.space_tol <= 0)
     with blas_single_threaded(), _quiet_unless_root(world):  # (space_tol > 0: repeated on, or refined to, finer meshes)
         return _driver(numerics)(job, physics, numerics, (grid, sync, record_times, limit))
 
@@ -119,6 +119,8 @@ def checks(scene=None, *, threads=None, model=None, **overrides) -> dict:
 
     >>> round(checks("tp4", h=0.05, k=0.01)["k_crit"], 3)
     0.052
+    >>> checks("memory_slab", h=0.25, k=0.1)["linear_solver"]  # (every scheme's checks, not the explicit one's alone)
+    'banded'
     >>> checks("tp4", h=0.05, k=0.1)  # doctest: +ELLIPSIS
     Traceback (most recent call last):
     ...
@@ -132,8 +134,10 @@ def checks(scene=None, *, threads=None, model=None, **overrides) -> dict:
     model, world = model or sc.model_of(), parallel.world()
     parallel.check(sc, model, numerics)
     preflight.refusals(sc, model, numerics, grid, None, processes=world.size)
+    job = _Run(sc, model, numerics, world, call="")
     with blas_single_threaded():
-        return _Run(sc, model, numerics, world, call="").set_up(grid, sync)[1].checks
+        job.set_up(grid, sync)
+    return job.checks
 
 
 def _driver(numerics):
@@ -418,9 +422,10 @@ class _Run:
     and the Dataset's attributes (scene -> model -> discretisation -> scheme -> recorded Dataset)."""
 
     def __init__(self, sc, model, numerics, world, call, *, resume=None, checkpoint=None, progress=None,
-                 given_grid=False):
+                 given_grid=False, final=True):
         self.sc, self.model, self.numerics, self.world, self.call = sc, model, numerics, world, call
         self.given_grid = given_grid  # (times=: the grid is kept in the restart state)
+        self.final = final  # (its Dataset is the run's result: not one mesh's of an adaptive run, world.finished)
         self.resume, self.checkpoint, self.progress = resume, checkpoint, progress
         self.failed_checkpoint, self.record_times = None, None
         # (space_tol > 0: the estimate in space; per element the largest indicator and what marking uses, over the run)
@@ -505,7 +510,8 @@ class _Run:
             raise failure
         state = restarts.capture(scheme, self.steps, self.recorder)  # (several MPI processes: every rank)
         ds = restarts.attach(ds, state) if self.world.root else None
-        finished(ds)  # (the command line's: kept should a stop signal come before the archive is written)
+        if self.final:  # (the command line's: kept should a stop signal come before the archive is written)
+            finished(ds)
         return ds
 
     def _records(self, failure):
