@@ -582,25 +582,32 @@ def _signalled_at(tmp_path, where: str, when: str, nth: int, *args, signum: int 
                           cwd=tmp_path, capture_output=True, text=True)
 
 
-@pytest.mark.parametrize("where, when, nth, mode", [
-    ("workbench.running.follow:_warned", "after", 1, "during"),  # (the meshes' records merged: the run is over)
-    ("workbench.running.adapt:_with_levels", "after", 1, "repeat"),  # (the levels added: the run is over)
-    ("workbench.running.runner:_Run.set_up", "before", 2, "during"),  # (the first finer mesh set up: not over)
+@pytest.mark.parametrize("where, when, nth, mode, kept", [
+    ("workbench.running.follow:_warned", "after", 1, "during", "whole"),  # (the meshes' records merged: run over)
+    ("workbench.running.adapt:_with_levels", "after", 1, "repeat", "whole"),  # (the levels added: the run is over)
+    ("workbench.running.adapt:_stop", "after", 8, "repeat", "whole"),  # (the loop said it was over)
+    ("workbench.running.adapt:_stop", "after", 1, "repeat", "first level"),  # (the loop going on to a finer mesh)
+    ("workbench.running.runner:_Run.set_up", "before", 2, "during", "nothing"),  # (a finer mesh set up: not over)
 ])
-def test_a_stop_signal_at_an_adaptive_runs_end_keeps_its_whole_result_or_nothing(tmp_path, where, when, nth, mode):
+def test_a_stop_signal_at_an_adaptive_runs_end_keeps_its_whole_result_or_nothing(tmp_path, where, when, nth, mode,
+                                                                                  kept):
     """The command kept the last run it saw finish, which for an adaptive run was one mesh's: a stop signal while the
     first finer mesh was set up wrote the first pass, which the run had just rejected (ndof 20 of 1734), as "the run
-    had completed"; one while the meshes' records were merged wrote the last mesh's alone, without its mesh (an
-    outside pass). Only an adaptive run's merged result is kept now; once it is made, the signal is dropped."""
+    had completed"; one while the meshes' records were merged wrote the last mesh's alone, without its mesh; one as
+    the loop decided it was over lost every level (two outside passes). Only an adaptive run's merged result is kept
+    now; once the loop is over, the signal is dropped."""
     p = _signalled_at(tmp_path, where, when, nth, *FOLLOWING, "--set", f"space_adapt={mode}", "-o", "a.nc")
     assert "Traceback" not in p.stderr, p.stderr
-    if nth == 2:  # (stopped during the run: nothing complete to keep, and nothing said to be)
+    if kept == "nothing":  # (stopped during the run: nothing complete to keep, and nothing said to be)
         assert p.returncode == 143 and not (tmp_path / "a.nc").exists() and "completed" not in p.stderr, p.stderr
         return
-    assert p.returncode == 0, p.stderr
     ds = workbench.load(tmp_path / "a.nc")
-    assert ds.attrs["status"] == "complete" and ds.attrs["space_stop"] == "met" and "adapted_mesh" in ds
-    assert ds.attrs["ndof"] > 1000 and float(ds.time[0]) == 0.0
+    assert ds.attrs["status"] == "complete" and float(ds.time[0]) == 0.0
+    if kept == "first level":
+        assert p.returncode == 143 and ds.attrs["space_stop"] == "interrupted" and ds.attrs["ndof"] == 20, p.stderr
+        return
+    assert p.returncode == 0, p.stderr
+    assert ds.attrs["space_stop"] == "met" and "adapted_mesh" in ds and ds.attrs["ndof"] > 1000
 
 
 def test_a_stop_signal_in_a_later_meshs_steps_keeps_every_meshs_records(tmp_path):
@@ -612,6 +619,38 @@ def test_a_stop_signal_in_a_later_meshs_steps_keeps_every_meshs_records(tmp_path
     ds = workbench.load(tmp_path / "a.nc")
     assert ds.attrs["status"] == "incomplete" and float(ds.time[0]) == 0.0 and ds.sizes["time"] > 2
     assert len(set(ds.ndof.values.tolist())) > 1  # (records of more than one mesh)
+
+
+_SIGNALLED_AS_IT_DIVERGES = """
+import os, sys
+from workbench.running.threads import lean_process
+lean_process()
+from workbench.errors import Diverged
+from workbench.running import runner
+once = runner._once
+
+def signalled(*args):
+    try:
+        return once(*args)
+    except Diverged:
+        os.kill(os.getpid(), 15)  # (the run's hold is over: the diverged run unwinds to the command)
+        raise
+
+runner._once = signalled
+from workbench.cli import console
+sys.exit(console())
+"""
+
+
+def test_a_stop_signal_as_a_diverged_run_unwinds_keeps_it(tmp_path):
+    """A diverged run unwinds through the run's calls to the command with its records; a stop signal on the way lost
+    them, "error: terminated", no archive (an outside pass). The command keeps the diverged run too, and writes it as
+    such (exit 3)."""
+    p = subprocess.run([sys.executable, "-c", _SIGNALLED_AS_IT_DIVERGES, "run", "tp4", "--h", "0.25", "--k", "0.2",
+                        "--T", "4", "--set", "allow_unstable=true", "--no-progress", "-o", "v.nc"], cwd=tmp_path,
+                       capture_output=True, text=True)
+    assert p.returncode == 3 and "Traceback" not in p.stderr and "beyond the bound" in p.stderr, p.stderr
+    assert workbench.load(tmp_path / "v.nc").attrs["status"] == "incomplete"
 
 
 def test_a_stop_signal_while_a_diverged_run_is_kept_does_not_lose_it(tmp_path):

@@ -315,8 +315,12 @@ def _stopped_after(err, kept: list):
     if not kept:
         raise err
     signum = err.signal if isinstance(err, Interrupted) else 2
-    _say(f"error: {stopped_by(signum)} after the run had completed: its results are kept\n", sys.stderr)
-    return kept[-1], 0, 128 + signum
+    ds, failure = kept[-1]
+    if failure is not None:  # (a diverged run, on its way here: kept as one)
+        _say(_one_line(f"error: {failure}"), sys.stderr)
+        return ds, EXIT_DIVERGED, 0
+    _say(f"error: {stopped_by(signum)} after the run had completed: its results are kept", sys.stderr)
+    return ds, 0, 128 + signum
 
 
 def _not_an_input(args, sc) -> None:
@@ -386,7 +390,9 @@ def _write_outputs(args, ds, code: int) -> int:
         target = _stopped_beside(args, ds) if code else args.output
         written, kept = _write_or_keep(ds, target)
         if written == 0:
-            said.append(f"wrote {target}" + (" (incomplete: see attrs 'failure')" if code else ""))
+            partial = code and ds.attrs.get("status") != "complete"  # (an adaptive run stopped between meshes keeps
+            said.append(f"wrote {target}" + (" (incomplete: see attrs 'failure')" if partial else  # a complete one)
+                                             " (stopped: see attrs 'space_stop')" if code else ""))
         if target != args.output:
             said.append(f"{args.output} keeps the state the run can go on from (--restart {args.output})")
         code = code or written

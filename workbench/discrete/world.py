@@ -126,11 +126,12 @@ def keep_finished(keep: bool = True) -> list:
     return _FINISHED["runs"]
 
 
-def finished(ds) -> None:
-    """A run's final, complete Dataset (a run on one mesh, or an adaptive run's merged result: not the run on each of
-    its meshes), made while the stop signals were held (:func:`keep_finished`)."""
+def finished(ds, failure=None) -> None:
+    """A run's final Dataset (a run on one mesh, or an adaptive run's merged result: not the run on each of its
+    meshes), made while the stop signals were held (:func:`keep_finished`), with the failure that stopped it (a
+    Diverged, raised with it; None: complete). A diverged run's, unwinding to the command, was lost to a signal too."""
     if _FINISHED["keep"] and ds is not None:
-        _FINISHED["runs"][:] = [ds]
+        _FINISHED["runs"][:] = [(ds, failure)]
 
 
 @contextlib.contextmanager

@@ -156,6 +156,10 @@ def check(problem, h=None, k=None, **overrides) -> None:
     if not sc["adhesion"]:  # (found after the run, as an AttributeError, by an outside pass; so was the next)
         raise ParameterError("adhesion = false: the paper's problems are compared by their bonding field beta, which "
                              "then is not modelled; run the scene with `workbench run` instead")
+    if sc.dim == 2 and not {(sc["width"], sc["height"]), (sc["width"], 0.0)} <= {tuple(p) for p in sc["probes"]}:
+        raise ParameterError(f"probes = {[list(p) for p in sc['probes']]}: the paper's numbers are read at the slab's "
+                             f"right end, ({sc['width']:g}, {sc['height']:g}) and ({sc['width']:g}, 0): keep them "
+                             "among the probes")
     if sc.dim == 1 and reference_kind(sc) == "ode":
         try:
             check_rod_ode(sc)
@@ -281,8 +285,9 @@ def key_numbers(problem, ds, ref=None):
         if problem == "tp4":  # the end separates beyond L at once: beta' = -gamma L^2 beta
             v = ds.attrs
             out["exp_prediction"] = math.exp(-v["gamma_nu"] * v["L"] ** 2 * float(ds.time[-1]))
-        tip = _probe(ds, 1.0, 0.1)
-        end = _probe(ds, 1.0, 0.0)
+        W, H = float(ds.attrs["width"]), float(ds.attrs["height"])  # (the slab's right end, as long as it is)
+        tip = _probe(ds, W, H)
+        end = _probe(ds, W, 0.0)
         uy_end = ds.u_probe.isel(probe=end).sel(component="y").values
         out["uy_tip_T"] = float(ds.u_probe.isel(probe=tip, time=-1).sel(component="y"))
         out["uy_end_T"] = float(uy_end[-1])

@@ -172,9 +172,9 @@ def displacement_dofs(ngmesh, geometry, order: int) -> int:
 def run(make_job, model, numerics, execute_args: tuple):
     """The adaptive loop (module docs): ``make_job(model)`` builds a run of the model (a runner ``_Run`` that
     estimates), ``execute_args`` are its ``execute``'s arguments. Returns the final run's Dataset."""
-    levels, ds, done = [], None, None  # (done: the last mesh's run, complete to T, and its body)
-    while True:
-        try:
+    levels, ds, done, stop = [], None, None, None  # (done: the last mesh's run, complete to T, and its body)
+    try:  # (a stop signal anywhere in the loop keeps the last complete level; one where it said it was over, the run)
+        while True:
             job = make_job(model)
             ds = job.execute(*execute_args)
             with signals_held():  # (a stop signal here comes once the level is counted, which it then keeps)
@@ -186,25 +186,23 @@ def run(make_job, model, numerics, execute_args: tuple):
                 levels.append((job.disc.ndof, job.space_estimate / scale,
                                ds.attrs["setup_time"] + ds.attrs["wall_time"]))
                 done = (ds, model.geometry)
-        except KeyboardInterrupt as err:
-            if done is None:
-                raise
-            raise _kept(err, done, levels) from None
-        stop = _stop(levels, numerics)
-        if stop:
-            break
-        try:
+                stop = _stop(levels, numerics)
+            if stop:
+                break
             geometry = _next(model.geometry, job.marked, numerics)
             if displacement_dofs(geometry.adapted_mesh, geometry, numerics.order) > numerics.max_dofs:
                 stop = "max_dofs"
                 break
-        except KeyboardInterrupt as err:
+            model = dataclasses.replace(model, geometry=geometry)
+        if stop != "met":
+            warnings.warn(f"space_tol = {numerics.space_tol:g} not met: the estimate is {levels[-1][1]:.3g} at "
+                          f"{levels[-1][0]} dofs ({'max_dofs' if stop == 'max_dofs' else f'{MAX_LEVELS} meshes'} "
+                          "reached)", RuntimeWarning, stacklevel=4)
+    except KeyboardInterrupt as err:
+        if done is None:
+            raise
+        if not stop:  # (a signal after the loop had ended comes after the run: dropped, as at a run's end)
             raise _kept(err, done, levels) from None
-        model = dataclasses.replace(model, geometry=geometry)
-    if stop != "met":
-        warnings.warn(f"space_tol = {numerics.space_tol:g} not met: the estimate is {levels[-1][1]:.3g} at "
-                      f"{levels[-1][0]} dofs ({'max_dofs' if stop == 'max_dofs' else f'{MAX_LEVELS} meshes'} "
-                      "reached)", RuntimeWarning, stacklevel=4)
     with signals_held(drop=True):  # (the loop is over: a stop signal while the levels are added is dropped, and the
         out = _with_levels(ds, levels, stop, model.geometry)  # result kept for the command line, world.finished)
         finished(out)

@@ -287,6 +287,8 @@ def run(make_job, model, numerics, execute_args: tuple):
             if err.dataset is not None:  # the last mesh's records alone were kept, an outside pass)
                 with signals_held(drop=True):
                     err.dataset = merge(segments + [(job.disc, err.dataset, None)], follow, job)
+                    if isinstance(err, Diverged):
+                        finished(err.dataset, err)
             raise
         return _final(segments + [(job.disc, ds, None)], follow, job)
 

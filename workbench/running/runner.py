@@ -507,6 +507,8 @@ class _Run:
         ds = self._records(failure) if self.world.root else None  # (several MPI processes: rank 0 holds them)
         if failure is not None:
             failure.dataset = ds
+            if self.final and isinstance(failure, Diverged):  # (kept, should a stop signal come as it unwinds)
+                finished(ds, failure)
             raise failure
         state = restarts.capture(scheme, self.steps, self.recorder)  # (several MPI processes: every rank)
         ds = restarts.attach(ds, state) if self.world.root else None
