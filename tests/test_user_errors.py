@@ -587,7 +587,7 @@ def _signalled_at(tmp_path, where: str, when: str, nth: int, *args, signum: int 
     ("workbench.running.adapt:_with_levels", "after", 1, "repeat", "whole"),  # (the levels added: the run is over)
     ("workbench.running.adapt:_stop", "after", 8, "repeat", "whole"),  # (the loop said it was over)
     ("workbench.running.adapt:_stop", "after", 1, "repeat", "first level"),  # (the loop going on to a finer mesh)
-    ("workbench.running.runner:_Run.set_up", "before", 2, "during", "nothing"),  # (a finer mesh set up: not over)
+    ("workbench.running.runner:_Run.set_up", "before", 2, "during", "records"),  # (a finer mesh set up: not over)
 ])
 def test_a_stop_signal_at_an_adaptive_runs_end_keeps_its_whole_result_or_nothing(tmp_path, where, when, nth, mode,
                                                                                   kept):
@@ -595,13 +595,16 @@ def test_a_stop_signal_at_an_adaptive_runs_end_keeps_its_whole_result_or_nothing
     first finer mesh was set up wrote the first pass, which the run had just rejected (ndof 20 of 1734), as "the run
     had completed"; one while the meshes' records were merged wrote the last mesh's alone, without its mesh; one as
     the loop decided it was over lost every level (two outside passes). Only an adaptive run's merged result is kept
-    now; once the loop is over, the signal is dropped."""
+    now; once the loop is over, the signal is dropped. Stopped while a finer mesh is set up, the run keeps the
+    records of the meshes before, to the time it went back to, as incomplete (it had lost them)."""
     p = _signalled_at(tmp_path, where, when, nth, *FOLLOWING, "--set", f"space_adapt={mode}", "-o", "a.nc")
     assert "Traceback" not in p.stderr, p.stderr
-    if kept == "nothing":  # (stopped during the run: nothing complete to keep, and nothing said to be)
-        assert p.returncode == 143 and not (tmp_path / "a.nc").exists() and "completed" not in p.stderr, p.stderr
-        return
     ds = workbench.load(tmp_path / "a.nc")
+    if kept == "records":  # (stopped during the run: its records so far, nothing said to be complete)
+        assert p.returncode == 143 and "completed" not in p.stderr and "while a finer mesh was set up" in p.stderr
+        assert ds.attrs["status"] == "incomplete" and ds.attrs["space_stop"] == "interrupted"
+        assert float(ds.time[0]) == 0.0 and 0.0 < float(ds.time[-1]) < 0.5
+        return
     assert ds.attrs["status"] == "complete" and float(ds.time[0]) == 0.0
     if kept == "first level":
         assert p.returncode == 143 and ds.attrs["space_stop"] == "interrupted" and ds.attrs["ndof"] == 20, p.stderr

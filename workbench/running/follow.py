@@ -267,13 +267,14 @@ def run(make_job, model, numerics, execute_args: tuple):
         job, r = _first_pass(make_job, model, follow, execute_args)
         if not isinstance(r, Refine):  # (met on the given mesh at every estimate time, or max_dofs)
             return r
+    owner = None  # (the job of the last segment: its mesh's records, should the run stop before the next's begin)
     while True:
         if r is not None:
             # back to the last estimate time that met the tolerance on this mesh; if none did since the run came to
             # this mesh, to where it came from (the same state, carried onto a finer mesh still), or to the start
             if r.saved is not None:
                 segments.append((job.disc, r.dataset, len(follow.refinements)))  # (its mesh: after so many)
-                resume = Carried(r, job)
+                resume, owner = Carried(r, job), job
             follow.refined(resume.time if resume is not None else 0.0)
             model = dataclasses.replace(model, geometry=r.geometry)
             job = make_job(model, resume=resume)
@@ -283,14 +284,32 @@ def run(make_job, model, numerics, execute_args: tuple):
         except Refine as refine:
             r = refine
             continue
-        except (Diverged, Interrupted) as err:  # (what every mesh computed, on the last one; a stop signal's too:
-            if err.dataset is not None:  # the last mesh's records alone were kept, an outside pass)
-                with signals_held(drop=True):
-                    err.dataset = merge(segments + [(job.disc, err.dataset, None)], follow, job)
-                    if isinstance(err, Diverged):
-                        finished(err.dataset, err)
+        except (Diverged, KeyboardInterrupt) as err:  # (what every mesh computed, on the last one; a stop signal's
+            if not isinstance(err, (Diverged, Interrupted)) or err.dataset is None:  # too: the last mesh's records
+                raise _stopped_between(err, segments, follow, owner) from None  # alone were kept, an outside pass)
+            with signals_held(drop=True):
+                err.dataset = merge(segments + [(job.disc, err.dataset, None)], follow, job)
+                if isinstance(err, Diverged):
+                    finished(err.dataset, err)
             raise
         return _final(segments + [(job.disc, ds, None)], follow, job)
+
+
+def _stopped_between(err, segments: list, follow: Follow, owner):
+    """A stop signal while a finer mesh was set up, its steps not begun: Interrupted with the records of the meshes
+    before, to the time the run went back to (a signal there lost every mesh's records, an outside pass); ``err``
+    itself where there are none (the run went back to the start)."""
+    from ..discrete.world import stopped_by
+
+    if not segments or owner is None or isinstance(err, Diverged):
+        return err
+    signal = err.signal if isinstance(err, Interrupted) else 2
+    with signals_held(drop=True):
+        ds = merge(segments, follow, owner)
+        message = (f"{ds.attrs['scene']}: {stopped_by(signal)} while a finer mesh was set up; the records to t = "
+                   f"{float(ds.time[-1]):.6g} s are kept")
+        ds.attrs.update(status="incomplete", failure=message, failure_type="Interrupted", space_stop="interrupted")
+    return Interrupted(message, dataset=ds, signal=signal)
 
 
 def _final(segments: list, follow: Follow, job, depth: int = 5) -> xr.Dataset:
