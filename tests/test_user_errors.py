@@ -588,6 +588,8 @@ def _signalled_at(tmp_path, where: str, when: str, nth: int, *args, signum: int 
     ("workbench.running.adapt:_stop", "after", 8, "repeat", "whole"),  # (the loop said it was over)
     ("workbench.running.adapt:_stop", "after", 1, "repeat", "first level"),  # (the loop going on to a finer mesh)
     ("workbench.running.runner:_Run.set_up", "before", 2, "during", "records"),  # (a finer mesh set up: not over)
+    ("workbench.running.follow:Follow.refine", "before", 1, "during", "records"),  # (the first pass judged)
+    ("workbench.running.follow:Carried", "after", 1, "during", "records"),  # (the finer mesh's start made)
 ])
 def test_a_stop_signal_at_an_adaptive_runs_end_keeps_its_whole_result_or_nothing(tmp_path, where, when, nth, mode,
                                                                                   kept):
@@ -601,9 +603,10 @@ def test_a_stop_signal_at_an_adaptive_runs_end_keeps_its_whole_result_or_nothing
     assert "Traceback" not in p.stderr, p.stderr
     ds = workbench.load(tmp_path / "a.nc")
     if kept == "records":  # (stopped during the run: its records so far, nothing said to be complete)
-        assert p.returncode == 143 and "completed" not in p.stderr and "while a finer mesh was set up" in p.stderr
+        assert p.returncode == 143 and "completed" not in p.stderr and "before a finer mesh's steps" in p.stderr
         assert ds.attrs["status"] == "incomplete" and ds.attrs["space_stop"] == "interrupted"
-        assert float(ds.time[0]) == 0.0 and 0.0 < float(ds.time[-1]) < 0.5
+        assert float(ds.time[0]) == 0.0 and 0.0 < float(ds.time[-1]) <= 0.5 + 1e-12
+        assert ds.refinement_ndof.values.size == 0 or ds.refinement_ndof.values[-1] == ds.attrs["ndof"]
         return
     assert ds.attrs["status"] == "complete" and float(ds.time[0]) == 0.0
     if kept == "first level":
@@ -630,28 +633,29 @@ from workbench.running.threads import lean_process
 lean_process()
 from workbench.errors import Diverged
 from workbench.running import runner
-once = runner._once
+execute = runner._Run.execute
 
 def signalled(*args):
     try:
-        return once(*args)
+        return execute(*args)
     except Diverged:
         os.kill(os.getpid(), 15)  # (the run's hold is over: the diverged run unwinds to the command)
         raise
 
-runner._once = signalled
+runner._Run.execute = signalled
 from workbench.cli import console
 sys.exit(console())
 """
 
 
-def test_a_stop_signal_as_a_diverged_run_unwinds_keeps_it(tmp_path):
+@pytest.mark.parametrize("adaptive", [(), ("--set", "space_tol=0.2", "--set", "space_adapt=repeat")])
+def test_a_stop_signal_as_a_diverged_run_unwinds_keeps_it(tmp_path, adaptive):
     """A diverged run unwinds through the run's calls to the command with its records; a stop signal on the way lost
-    them, "error: terminated", no archive (an outside pass). The command keeps the diverged run too, and writes it as
-    such (exit 3)."""
+    them, "error: terminated", no archive (two outside passes: a run on one mesh, then an adaptive one). The command
+    and the adaptive loops keep the diverged run, and it is written as such (exit 3)."""
     p = subprocess.run([sys.executable, "-c", _SIGNALLED_AS_IT_DIVERGES, "run", "tp4", "--h", "0.25", "--k", "0.2",
-                        "--T", "4", "--set", "allow_unstable=true", "--no-progress", "-o", "v.nc"], cwd=tmp_path,
-                       capture_output=True, text=True)
+                        "--T", "4", "--set", "allow_unstable=true", *adaptive, "--no-progress", "-o", "v.nc"],
+                       cwd=tmp_path, capture_output=True, text=True)
     assert p.returncode == 3 and "Traceback" not in p.stderr and "beyond the bound" in p.stderr, p.stderr
     assert workbench.load(tmp_path / "v.nc").attrs["status"] == "incomplete"
 

@@ -115,10 +115,10 @@ LABELS = {
     "symmetric_beta_end_T": "symmetric truncation: beta_h(1, 0, T)",
     "exp_prediction": "e^{-gamma L^2 T} (end in tension beyond L)",
     "facet_x": "x of the end facet (midpoint)",
-    "uy_tip_T": "u_y(1, 0.1, T) (loaded corner)",
-    "uy_end_T": "u_y(1, 0, T)",
-    "uy_end_min": "min over t of u_y(1, 0, t)",
-    "uy_end_max": "max over t of u_y(1, 0, t)",
+    "uy_tip_T": "u_y(W, H, T) (loaded corner)",
+    "uy_end_T": "u_y(W, 0, T)",
+    "uy_end_min": "min over t of u_y(W, 0, t)",
+    "uy_end_max": "max over t of u_y(W, 0, t)",
     "vm_max_T": "max von Mises at T [Pa]",
     "vm_max_x": "  at cell centroid x",
     "vm_max_y": "  at cell centroid y",
@@ -420,6 +420,8 @@ def report(problem, result) -> str:
             f"{name} = {mine} (the paper's {theirs})" for name, (theirs, mine) in changed.items()))
     for key, val in result["numbers"].items():
         label = LABELS.get(key, key)
+        if "width" in ds.attrs:  # (the slab's end where it is: a slab of another width or height, an outside pass)
+            label = label.replace("(W,", f"({ds.attrs['width']:g},").replace(", H,", f", {ds.attrs['height']:g},")
         ref = paper.get(key, "")
         lines.append(f"  {label:<58} {val:>12.6g}   {('paper: ' + ref) if ref else ''}".rstrip())
     return "\n".join(lines)

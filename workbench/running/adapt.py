@@ -31,6 +31,7 @@ import xarray as xr
 
 from ..discrete.estimator import longest_edges
 from ..discrete.world import finished, signals_held
+from ..errors import Diverged
 from ..input.geometry import on_mesh
 from ..input.meshes import to_text
 
@@ -172,7 +173,7 @@ def displacement_dofs(ngmesh, geometry, order: int) -> int:
 def run(make_job, model, numerics, execute_args: tuple):
     """The adaptive loop (module docs): ``make_job(model)`` builds a run of the model (a runner ``_Run`` that
     estimates), ``execute_args`` are its ``execute``'s arguments. Returns the final run's Dataset."""
-    levels, ds, done, stop = [], None, None, None  # (done: the last mesh's run, complete to T, and its body)
+    levels, ds, done, stop, job = [], None, None, None, None  # (done: the last mesh's run, complete to T, its body)
     try:  # (a stop signal anywhere in the loop keeps the last complete level; one where it said it was over, the run)
         while True:
             job = make_job(model)
@@ -199,6 +200,8 @@ def run(make_job, model, numerics, execute_args: tuple):
                           f"{levels[-1][0]} dofs ({'max_dofs' if stop == 'max_dofs' else f'{MAX_LEVELS} meshes'} "
                           "reached)", RuntimeWarning, stacklevel=4)
     except KeyboardInterrupt as err:
+        if job is not None and isinstance(job.failed, Diverged):  # (a diverged level, unwinding: its own failure)
+            raise job.failed from None
         if done is None:
             raise
         if not stop:  # (a signal after the loop had ended comes after the run: dropped, as at a run's end)

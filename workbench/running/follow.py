@@ -269,24 +269,26 @@ def run(make_job, model, numerics, execute_args: tuple):
             return r
     owner = None  # (the job of the last segment: its mesh's records, should the run stop before the next's begin)
     while True:
-        if r is not None:
-            # back to the last estimate time that met the tolerance on this mesh; if none did since the run came to
-            # this mesh, to where it came from (the same state, carried onto a finer mesh still), or to the start
-            if r.saved is not None:
-                segments.append((job.disc, r.dataset, len(follow.refinements)))  # (its mesh: after so many)
-                resume, owner = Carried(r, job), job
-            follow.refined(resume.time if resume is not None else 0.0)
-            model = dataclasses.replace(model, geometry=r.geometry)
-            job = make_job(model, resume=resume)
-        job.follow = follow
-        try:
+        try:  # (a stop signal from here on keeps the records so far: they were lost, an outside pass)
+            if r is not None:
+                # back to the last estimate time that met the tolerance on this mesh; if none did since the run came
+                # to this mesh, to where it came from (the same state, carried onto a finer mesh still), or to the start
+                if r.saved is not None:
+                    owner = job
+                    segments.append((job.disc, r.dataset, len(follow.refinements)))  # (its mesh: after so many)
+                    resume = Carried(r, job)
+                follow.refined(resume.time if resume is not None else 0.0)
+                model, r = dataclasses.replace(model, geometry=r.geometry), None
+                job = make_job(model, resume=resume)
+            job.follow = follow
             ds = job.execute(*execute_args)
         except Refine as refine:
             r = refine
             continue
         except (Diverged, KeyboardInterrupt) as err:  # (what every mesh computed, on the last one; a stop signal's
-            if not isinstance(err, (Diverged, Interrupted)) or err.dataset is None:  # too: the last mesh's records
-                raise _stopped_between(err, segments, follow, owner) from None  # alone were kept, an outside pass)
+            err = job.failed if isinstance(job.failed, Diverged) else err  # too, and a diverged run's it replaced)
+            if not isinstance(err, (Diverged, Interrupted)) or err.dataset is None:  # (the last mesh's records alone
+                raise _stopped_between(err, segments, follow, owner) from None  # were kept, an outside pass)
             with signals_held(drop=True):
                 err.dataset = merge(segments + [(job.disc, err.dataset, None)], follow, job)
                 if isinstance(err, Diverged):
@@ -296,18 +298,19 @@ def run(make_job, model, numerics, execute_args: tuple):
 
 
 def _stopped_between(err, segments: list, follow: Follow, owner):
-    """A stop signal while a finer mesh was set up, its steps not begun: Interrupted with the records of the meshes
-    before, to the time the run went back to (a signal there lost every mesh's records, an outside pass); ``err``
-    itself where there are none (the run went back to the start)."""
+    """A stop signal between meshes (a finer mesh's steps not begun, or the first pass judged): Interrupted with the
+    records of the meshes before, to the time the run went back to (a signal there lost every mesh's records, an
+    outside pass); ``err`` itself where there are none (the run went back to the start)."""
     from ..discrete.world import stopped_by
 
-    if not segments or owner is None or isinstance(err, Diverged):
+    if not segments or owner is None or segments[-1][0] is not owner.disc or isinstance(err, Diverged):
         return err
     signal = err.signal if isinstance(err, Interrupted) else 2
     with signals_held(drop=True):
+        follow.refinements = follow.refinements[:segments[-1][2]]  # (the refinement not run is not the archive's)
         ds = merge(segments, follow, owner)
-        message = (f"{ds.attrs['scene']}: {stopped_by(signal)} while a finer mesh was set up; the records to t = "
-                   f"{float(ds.time[-1]):.6g} s are kept")
+        message = (f"{ds.attrs['scene']}: {stopped_by(signal)} before a finer mesh's steps; the records to t = "
+                   f"{float(ds.time[-1]):.6g} s, on the meshes before, are kept")
         ds.attrs.update(status="incomplete", failure=message, failure_type="Interrupted", space_stop="interrupted")
     return Interrupted(message, dataset=ds, signal=signal)
 
@@ -342,15 +345,19 @@ def _first_pass(make_job, model, follow: Follow, execute_args: tuple):
     job.follow = follow
     try:
         ds = job.execute(*execute_args)
-    except Diverged as err:  # (on the given mesh: that mesh's records, in the archive's layout)
+    except (Diverged, Interrupted) as err:  # (on the given mesh: that mesh's records, in the archive's layout)
         if err.dataset is not None:
-            err.dataset = merge([(job.disc, err.dataset, None)], follow, job)
+            with signals_held(drop=True):
+                err.dataset = merge([(job.disc, err.dataset, None)], follow, job)
         raise
-    follow.watching, follow.scale = False, follow.norm
-    failed = [i for i, (e, displacement, _, _) in enumerate(follow.seen) if follow.too_large(e, displacement)]
-    if failed:
-        estimate, displacement, body, mesh = follow.seen[failed[0]]
-        follow.refine(estimate, body, mesh, *follow.failing(estimate, displacement))
+    try:  # (a stop signal while the pass is judged, or the finer mesh made, keeps the pass: it was lost)
+        follow.watching, follow.scale = False, follow.norm
+        failed = [i for i, (e, displacement, _, _) in enumerate(follow.seen) if follow.too_large(e, displacement)]
+        if failed:
+            estimate, displacement, body, mesh = follow.seen[failed[0]]
+            follow.refine(estimate, body, mesh, *follow.failing(estimate, displacement))
+    except KeyboardInterrupt as err:
+        raise _stopped_between(err, [(job.disc, ds, 0)], follow, job) from None
     saved = follow.kept[failed[0] - 1] if failed and failed[0] > 0 else None
     follow.seen, follow.kept = [], []
     if follow.geometry is None:

@@ -426,6 +426,7 @@ class _Run:
         self.sc, self.model, self.numerics, self.world, self.call = sc, model, numerics, world, call
         self.given_grid = given_grid  # (times=: the grid is kept in the restart state)
         self.final = final  # (its Dataset is the run's result: not one mesh's of an adaptive run, world.finished)
+        self.failed = None  # (the failure its run ended in, with its records: kept should a signal replace it)
         self.resume, self.checkpoint, self.progress = resume, checkpoint, progress
         self.failed_checkpoint, self.record_times = None, None
         # (space_tol > 0: the estimate in space; per element the largest indicator and what marking uses, over the run)
@@ -506,8 +507,8 @@ class _Run:
         """The run's Dataset with the state to go on from, or ``failure`` raised with the records."""
         ds = self._records(failure) if self.world.root else None  # (several MPI processes: rank 0 holds them)
         if failure is not None:
-            failure.dataset = ds
-            if self.final and isinstance(failure, Diverged):  # (kept, should a stop signal come as it unwinds)
+            failure.dataset, self.failed = ds, failure  # (kept, should a stop signal come as it unwinds)
+            if self.final and isinstance(failure, Diverged):
                 finished(ds, failure)
             raise failure
         state = restarts.capture(scheme, self.steps, self.recorder)  # (several MPI processes: every rank)
