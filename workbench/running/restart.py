@@ -289,7 +289,8 @@ def archived_scene(ds: xr.Dataset, *, whole: bool = False, **overrides):
     a = ds.attrs
     values = json.loads(a["parameters_json"])
     if "stored_mesh" in ds and "mesh" not in overrides and not Path(str(values.get("mesh", ""))).is_file():
-        from ..input.meshes import restore  # (a mesh given as a Python object, its file in a cache cleared since)
+        # (a mesh given as a Python object, its file in a cache cleared since)
+        from ..input.meshes import restore
 
         overrides = dict(overrides, mesh=str(restore(str(ds.stored_mesh.values))))
     if not whole and "set_by_user_json" in a:
