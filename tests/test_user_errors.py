@@ -607,6 +607,11 @@ def test_a_stop_signal_at_an_adaptive_runs_end_keeps_its_whole_result_or_nothing
         assert ds.attrs["status"] == "incomplete" and ds.attrs["space_stop"] == "interrupted"
         assert float(ds.time[0]) == 0.0 and 0.0 < float(ds.time[-1]) <= 0.5 + 1e-12
         assert ds.refinement_ndof.values.size == 0 or ds.refinement_ndof.values[-1] == ds.attrs["ndof"]
+        # (no state to go on from: a first pass's state at T, kept, was continued as a complete run that never
+        # refined, an outside pass)
+        again = subprocess.run([sys.executable, "-m", "workbench.cli", "run", "--restart", "a.nc", "-o", "b.nc"],
+                               cwd=tmp_path, capture_output=True, text=True)
+        assert again.returncode == 2 and "no restart state" in again.stderr, again.stderr
         return
     assert ds.attrs["status"] == "complete" and float(ds.time[0]) == 0.0
     if kept == "first level":

@@ -50,6 +50,7 @@ from ..input.geometry import adapted_mesh, on_mesh
 from ..input.meshes import from_text, to_text
 from ..output.results import ugrid_mesh
 from . import adapt
+from .restart import without_state
 
 
 class Refine(Exception):
@@ -308,9 +309,10 @@ def _stopped_between(err, segments: list, follow: Follow, owner):
     signal = err.signal if isinstance(err, Interrupted) else 2
     with signals_held(drop=True):
         follow.refinements = follow.refinements[:segments[-1][2]]  # (the refinement not run is not the archive's)
-        ds = merge(segments, follow, owner)
+        # (no state to go on from: a pass's state at T, kept, was continued as a complete run that never refined)
+        ds = without_state(merge(segments, follow, owner))
         message = (f"{ds.attrs['scene']}: {stopped_by(signal)} before a finer mesh's steps; the records to t = "
-                   f"{float(ds.time[-1]):.6g} s, on the meshes before, are kept")
+                   f"{float(ds.time[-1]):.6g} s are kept")
         ds.attrs.update(status="incomplete", failure=message, failure_type="Interrupted", space_stop="interrupted")
     return Interrupted(message, dataset=ds, signal=signal)
 
